@@ -1,0 +1,342 @@
+//! Point clouds: positions plus named per-point scalar attributes.
+//!
+//! This is the actual-point set 𝒫 of the paper (§III-A/B): only measured
+//! points are stored. Non-data points ℬ are never created; the separability
+//! code estimates their *count* from the local density instead.
+//!
+//! Attributes (intensity, colour channels, any named float field of the
+//! input) are kept as named `f32` channels of the same length as the points,
+//! so that the weighted separability (paper Eq. 9) can pick them by name.
+//! Colour is stored as the channels `r`, `g`, `b` in `[0, 1]`; [`PointCloud::luma`]
+//! derives the Rec. 601 luma from them.
+
+use nalgebra::Vector3;
+use thiserror::Error;
+
+/// 3-vector of `f64` used for every position and direction in sepmem.
+pub type Vec3 = Vector3<f64>;
+
+/// Errors about the content of a point cloud.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum CloudError {
+    /// The cloud has no (finite) points.
+    #[error("point cloud is empty (no finite points)")]
+    Empty,
+    /// Too few points to do what was asked.
+    #[error("point cloud has {got} points, at least {need} are needed")]
+    TooFewPoints {
+        /// Points present.
+        got: usize,
+        /// Points required.
+        need: usize,
+    },
+    /// All points lie on (nearly) a plane, a line or a single point.
+    #[error("point cloud is degenerate: its extent is {extent:?}")]
+    Degenerate {
+        /// Bounding-box edge lengths.
+        extent: [f64; 3],
+    },
+    /// An attribute channel does not have one value per point.
+    #[error("attribute `{name}` has {got} values for {points} points")]
+    AttributeLength {
+        /// Attribute name.
+        name: String,
+        /// Number of values.
+        got: usize,
+        /// Number of points.
+        points: usize,
+    },
+}
+
+/// A named scalar channel, one value per point.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Attribute {
+    /// Channel name (`intensity`, `r`, `g`, `b`, or the input field's name).
+    pub name: String,
+    /// One value per point.
+    pub values: Vec<f32>,
+}
+
+/// Axis-aligned bounding box.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Aabb {
+    /// Minimum corner.
+    pub min: Vec3,
+    /// Maximum corner.
+    pub max: Vec3,
+}
+
+impl Aabb {
+    /// The empty box (min = +∞, max = −∞); growing it by a point gives that point.
+    pub fn empty() -> Self {
+        Self {
+            min: Vec3::repeat(f64::INFINITY),
+            max: Vec3::repeat(f64::NEG_INFINITY),
+        }
+    }
+
+    /// Bounding box of a set of points (empty box for no points).
+    pub fn from_points<'a>(points: impl IntoIterator<Item = &'a Vec3>) -> Self {
+        let mut b = Self::empty();
+        for p in points {
+            b.grow(p);
+        }
+        b
+    }
+
+    /// Enlarge the box to contain `p`.
+    pub fn grow(&mut self, p: &Vec3) {
+        self.min = self.min.inf(p);
+        self.max = self.max.sup(p);
+    }
+
+    /// True when no point was added.
+    pub fn is_empty(&self) -> bool {
+        self.min.x > self.max.x
+    }
+
+    /// Edge lengths (zero for the empty box).
+    pub fn extent(&self) -> Vec3 {
+        if self.is_empty() {
+            Vec3::zeros()
+        } else {
+            self.max - self.min
+        }
+    }
+
+    /// Length of the longest edge.
+    pub fn longest_edge(&self) -> f64 {
+        self.extent().max()
+    }
+
+    /// Centre of the box.
+    pub fn center(&self) -> Vec3 {
+        (self.min + self.max) * 0.5
+    }
+
+    /// Length of the diagonal.
+    pub fn diagonal(&self) -> f64 {
+        self.extent().norm()
+    }
+
+    /// The box enlarged by `margin` on every side.
+    pub fn inflated(&self, margin: f64) -> Self {
+        Self {
+            min: self.min - Vec3::repeat(margin),
+            max: self.max + Vec3::repeat(margin),
+        }
+    }
+
+    /// True when `p` lies inside or on the box.
+    pub fn contains(&self, p: &Vec3) -> bool {
+        (0..3).all(|i| p[i] >= self.min[i] && p[i] <= self.max[i])
+    }
+}
+
+/// A point cloud: finite positions and optional named attributes.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PointCloud {
+    /// Point positions.
+    pub points: Vec<Vec3>,
+    /// Named per-point channels, each as long as `points`.
+    pub attributes: Vec<Attribute>,
+}
+
+impl PointCloud {
+    /// A cloud of positions only.
+    pub fn from_points(points: Vec<Vec3>) -> Self {
+        Self {
+            points,
+            attributes: Vec::new(),
+        }
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// True when there are no points.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// Bounding box of the points.
+    pub fn aabb(&self) -> Aabb {
+        Aabb::from_points(&self.points)
+    }
+
+    /// Mean of the positions (`None` for an empty cloud).
+    pub fn centroid(&self) -> Option<Vec3> {
+        if self.points.is_empty() {
+            return None;
+        }
+        let sum: Vec3 = self.points.iter().sum();
+        Some(sum / self.points.len() as f64)
+    }
+
+    /// The attribute channel named `name`, if present.
+    pub fn attribute(&self, name: &str) -> Option<&[f32]> {
+        self.attributes
+            .iter()
+            .find(|a| a.name == name)
+            .map(|a| a.values.as_slice())
+    }
+
+    /// Add (or replace) a named attribute channel.
+    ///
+    /// # Errors
+    /// [`CloudError::AttributeLength`] when `values` does not have one value per point.
+    pub fn set_attribute(&mut self, name: &str, values: Vec<f32>) -> Result<(), CloudError> {
+        if values.len() != self.points.len() {
+            return Err(CloudError::AttributeLength {
+                name: name.to_string(),
+                got: values.len(),
+                points: self.points.len(),
+            });
+        }
+        if let Some(a) = self.attributes.iter_mut().find(|a| a.name == name) {
+            a.values = values;
+        } else {
+            self.attributes.push(Attribute {
+                name: name.to_string(),
+                values,
+            });
+        }
+        Ok(())
+    }
+
+    /// Rec. 601 luma `0.299 r + 0.587 g + 0.114 b` from the `r`, `g`, `b`
+    /// channels, or `None` when the cloud carries no colour.
+    pub fn luma(&self) -> Option<Vec<f32>> {
+        let (r, g, b) = (
+            self.attribute("r")?,
+            self.attribute("g")?,
+            self.attribute("b")?,
+        );
+        Some(
+            r.iter()
+                .zip(g)
+                .zip(b)
+                .map(|((r, g), b)| 0.299 * r + 0.587 * g + 0.114 * b)
+                .collect(),
+        )
+    }
+
+    /// Keep only the points for which `keep(i)` is true, in all channels.
+    pub fn retain_indices(&mut self, mut keep: impl FnMut(usize) -> bool) {
+        let mask: Vec<bool> = (0..self.points.len()).map(&mut keep).collect();
+        let mut it = mask.iter();
+        self.points.retain(|_| *it.next().unwrap_or(&false));
+        for a in &mut self.attributes {
+            let mut it = mask.iter();
+            a.values.retain(|_| *it.next().unwrap_or(&false));
+        }
+    }
+
+    /// Drop every point whose position is NaN or infinite; return how many were dropped.
+    pub fn drop_non_finite(&mut self) -> usize {
+        let before = self.points.len();
+        let finite: Vec<bool> = self
+            .points
+            .iter()
+            .map(|p| p.iter().all(|c| c.is_finite()))
+            .collect();
+        self.retain_indices(|i| finite[i]);
+        before - self.points.len()
+    }
+
+    /// A new cloud holding the points at `indices` (with their attributes).
+    pub fn select(&self, indices: &[usize]) -> Self {
+        Self {
+            points: indices.iter().map(|&i| self.points[i]).collect(),
+            attributes: self
+                .attributes
+                .iter()
+                .map(|a| Attribute {
+                    name: a.name.clone(),
+                    values: indices.iter().map(|&i| a.values[i]).collect(),
+                })
+                .collect(),
+        }
+    }
+
+    /// Check that the cloud can carry a surface: enough points and a 3D extent.
+    ///
+    /// # Errors
+    /// [`CloudError::Empty`], [`CloudError::TooFewPoints`] or [`CloudError::Degenerate`].
+    pub fn validate(&self, min_points: usize) -> Result<Aabb, CloudError> {
+        if self.points.is_empty() {
+            return Err(CloudError::Empty);
+        }
+        if self.points.len() < min_points {
+            return Err(CloudError::TooFewPoints {
+                got: self.points.len(),
+                need: min_points,
+            });
+        }
+        for a in &self.attributes {
+            if a.values.len() != self.points.len() {
+                return Err(CloudError::AttributeLength {
+                    name: a.name.clone(),
+                    got: a.values.len(),
+                    points: self.points.len(),
+                });
+            }
+        }
+        let bb = self.aabb();
+        let e = bb.extent();
+        let longest = e.max();
+        if !(longest > 0.0) || e.min() < 1e-6 * longest {
+            return Err(CloudError::Degenerate {
+                extent: [e.x, e.y, e.z],
+            });
+        }
+        Ok(bb)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn drop_non_finite_keeps_attributes_aligned() {
+        let mut c = PointCloud::from_points(vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(f64::NAN, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(0.0, f64::INFINITY, 0.0),
+        ]);
+        c.set_attribute("intensity", vec![1.0, 2.0, 3.0, 4.0])
+            .unwrap();
+        assert_eq!(c.drop_non_finite(), 2);
+        assert_eq!(c.len(), 2);
+        assert_eq!(c.attribute("intensity").unwrap(), &[1.0, 3.0]);
+    }
+
+    #[test]
+    fn validate_rejects_empty_and_planar() {
+        assert_eq!(PointCloud::default().validate(1), Err(CloudError::Empty));
+        let planar = PointCloud::from_points(
+            (0..100)
+                .map(|i| Vec3::new(i as f64, (i * 7 % 13) as f64, 0.0))
+                .collect(),
+        );
+        assert!(matches!(
+            planar.validate(4),
+            Err(CloudError::Degenerate { .. })
+        ));
+    }
+
+    #[test]
+    fn luma_from_rgb() {
+        let mut c = PointCloud::from_points(vec![Vec3::zeros(); 2]);
+        c.set_attribute("r", vec![1.0, 0.0]).unwrap();
+        c.set_attribute("g", vec![1.0, 0.0]).unwrap();
+        c.set_attribute("b", vec![1.0, 1.0]).unwrap();
+        let l = c.luma().unwrap();
+        assert!((l[0] - 1.0).abs() < 1e-6);
+        assert!((l[1] - 0.114).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,3 @@
+//! One module per `sepmem` subcommand.
+
+pub mod config;
