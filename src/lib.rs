@@ -13,14 +13,18 @@
 //! | [`mesh`] | the indexed triangle mesh produced by the membrane, with per-vertex scalars |
 //! | [`config`] | the one annotated configuration (`launch/sepmem.json5`), loading and `--set` overrides |
 //! | [`error`] | the crate-level error type |
+//! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
+//! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
 //!
 //! Every module's own documentation cites the paper's equations it implements.
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
 pub mod cloud;
 pub mod config;
+pub mod density;
 pub mod error;
 pub mod mesh;
+pub mod separability;
 
 pub use cloud::{Aabb, Attribute, PointCloud, Vec3};
 pub use error::{Error, Result};
