@@ -113,7 +113,7 @@ fn check_res(shape: &'static str, got: usize, min: usize) -> Result<(), ShapeErr
 pub fn normalise_unit_longest_edge(mesh: &mut TriMesh) -> f64 {
     let bb = mesh.aabb();
     let longest = bb.longest_edge();
-    if mesh.vertices.is_empty() || !(longest > 0.0) || !longest.is_finite() {
+    if mesh.vertices.is_empty() || !longest.is_finite() || longest <= 0.0 {
         return 1.0;
     }
     let c = bb.center();
