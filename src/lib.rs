@@ -13,6 +13,7 @@
 //! | [`mesh`] | the indexed triangle mesh produced by the membrane, with per-vertex scalars |
 //! | [`config`] | the one annotated configuration (`launch/sepmem.json5`), loading and `--set` overrides |
 //! | [`error`] | the crate-level error type |
+//! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
 //! | [`spline`] | the closed cubic B-spline surface (Eq. 10), its least-squares fit and growth |
 //!
 //! Every module's own documentation cites the paper's equations it implements.
@@ -22,6 +23,7 @@ pub mod cloud;
 pub mod config;
 pub mod error;
 pub mod mesh;
+pub mod shapes;
 pub mod spline;
 
 pub use cloud::{Aabb, Attribute, PointCloud, Vec3};
