@@ -195,7 +195,7 @@ fn factor_band(a: &mut [f64], n: usize, bw: usize) -> Result<(), SplineError> {
                 s -= a[ri + p] * a[rj + p];
             }
             if i == j {
-                if !(s > 0.0) || !s.is_finite() {
+                if s.is_nan() || s <= 0.0 || !s.is_finite() {
                     return Err(SplineError::Singular { row: i });
                 }
                 a[i * width + bw] = s.sqrt();
