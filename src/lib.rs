@@ -15,6 +15,8 @@
 //! | [`error`] | the crate-level error type |
 //! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
 //! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
+//! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
+//! | [`spline`] | the closed cubic B-spline surface (Eq. 10), its least-squares fit and growth |
 //!
 //! Every module's own documentation cites the paper's equations it implements.
 #![cfg_attr(test, allow(clippy::unwrap_used))]
@@ -25,6 +27,8 @@ pub mod density;
 pub mod error;
 pub mod mesh;
 pub mod separability;
+pub mod shapes;
+pub mod spline;
 
 pub use cloud::{Aabb, Attribute, PointCloud, Vec3};
 pub use error::{Error, Result};
