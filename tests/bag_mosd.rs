@@ -20,7 +20,7 @@ const DB3_STRIDE: usize = 8;
 const STEP_M: f64 = 0.005;
 
 /// `(x, y, z, rgba)` of a binary `x y z rgba` PCD.
-fn read_pcd(path: &Path) -> Vec<([f32; 3], u32)> {
+fn read_pcd(path: &Path) -> Vec<SourcePoint> {
     let raw = std::fs::read(path).unwrap();
     let marker = b"DATA binary\n";
     let end = raw.windows(marker.len()).position(|w| w == marker).unwrap() + marker.len();
@@ -45,10 +45,15 @@ fn read_pcd(path: &Path) -> Vec<([f32; 3], u32)> {
         .collect()
 }
 
+/// `(x, y, z)` and packed `rgba` of one source point.
+type SourcePoint = ([f32; 3], u32);
+/// scene → [(label, points)].
+type Scenes = BTreeMap<String, Vec<(i64, Vec<SourcePoint>)>>;
+
 /// scene → [(label, points)] from the shared dataset.
-fn source_objects(datasets: &Path) -> BTreeMap<String, Vec<(i64, Vec<([f32; 3], u32)>)>> {
+fn source_objects(datasets: &Path) -> Scenes {
     let dir = datasets.join("mosd_tabletop_segmentation/extracted_objects");
-    let mut out: BTreeMap<String, Vec<(i64, Vec<([f32; 3], u32)>)>> = BTreeMap::new();
+    let mut out = Scenes::new();
     let mut files: Vec<_> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -109,7 +114,7 @@ fn check_bag_against_sources(bag: &Bag, frames: usize, stride: usize, scenes: Op
         assert_eq!(parts.len(), objects.len(), "{}: labels", m.topic);
         for (label, src) in objects {
             let part = &parts[label];
-            let expect: Vec<&([f32; 3], u32)> = src.iter().skip(k).step_by(stride).collect();
+            let expect: Vec<&SourcePoint> = src.iter().skip(k).step_by(stride).collect();
             assert_eq!(
                 part.len(),
                 expect.len(),
