@@ -13,14 +13,26 @@
 //! | [`mesh`] | the indexed triangle mesh produced by the membrane, with per-vertex scalars |
 //! | [`config`] | the one annotated configuration (`launch/sepmem.json5`), loading and `--set` overrides |
 //! | [`error`] | the crate-level error type |
+//! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
+//! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
+//! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
+//! | [`spline`] | the closed cubic B-spline surface (Eq. 10), its least-squares fit and growth |
+//! | [`bag`] | rosbag2 bags: MCAP and sqlite3 reading, MCAP writing with ROS 2 schemas |
+//! | [`wire`] | ROS 2 messages, CDR codec, RIHS01 type hashes, PointCloud2 ↔ points |
 //!
 //! Every module's own documentation cites the paper's equations it implements.
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
+pub mod bag;
 pub mod cloud;
 pub mod config;
+pub mod density;
 pub mod error;
 pub mod mesh;
+pub mod separability;
+pub mod shapes;
+pub mod spline;
+pub mod wire;
 
 pub use cloud::{Aabb, Attribute, PointCloud, Vec3};
 pub use error::{Error, Result};
