@@ -16,6 +16,7 @@
 //! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
 //! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
 //! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
+//! | [`membrane`] | the separability membrane: initialisation, evolution, dynamic adjustment, mesh extraction |
 //! | [`spline`] | the closed cubic B-spline surface (Eq. 10), its least-squares fit and growth |
 //!
 //! Every module's own documentation cites the paper's equations it implements.
@@ -25,6 +26,7 @@ pub mod cloud;
 pub mod config;
 pub mod density;
 pub mod error;
+pub mod membrane;
 pub mod mesh;
 pub mod separability;
 pub mod shapes;
