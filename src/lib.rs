@@ -16,6 +16,7 @@
 //! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
 //! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
 //! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
+//! | [`membrane`] | the separability membrane: initialisation, evolution, dynamic adjustment, mesh extraction |
 //! | [`spline`] | the closed cubic B-spline surface (Eq. 10), its least-squares fit and growth |
 //! | [`bag`] | rosbag2 bags: MCAP and sqlite3 reading, MCAP writing with ROS 2 schemas |
 //! | [`wire`] | ROS 2 messages, CDR codec, RIHS01 type hashes, PointCloud2 ↔ points |
@@ -28,6 +29,7 @@ pub mod cloud;
 pub mod config;
 pub mod density;
 pub mod error;
+pub mod membrane;
 pub mod mesh;
 pub mod separability;
 pub mod shapes;
