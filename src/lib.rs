@@ -31,6 +31,7 @@ pub mod density;
 pub mod error;
 pub mod membrane;
 pub mod mesh;
+pub mod pipeline;
 pub mod separability;
 pub mod shapes;
 pub mod spline;

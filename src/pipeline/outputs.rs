@@ -7,10 +7,8 @@
 //! separability to a blue (low) → yellow (high) ramp.
 
 use super::{FrameResult, StartPath};
-use crate::wire::msgs::{
-    ColorRGBA, FrameDiagnostics, Header, Marker, MarkerArray, MeshTriangle, Point, SurfaceMesh,
-    Vector3,
-};
+use crate::wire::convert::{delete_all_marker, to_shape_mesh, to_triangle_list_marker};
+use crate::wire::msgs::{ColorRGBA, FrameDiagnostics, Header, Marker, MarkerArray, SurfaceMesh};
 
 /// Name of the per-vertex separability channel in membrane meshes.
 pub const SEPARABILITY: &str = "separability";
@@ -19,24 +17,13 @@ pub const SEPARABILITY: &str = "separability";
 pub fn surface_mesh(r: &FrameResult, header: &Header) -> SurfaceMesh {
     let rec = &r.reconstruction;
     let mesh = &rec.mesh;
+    let geometry = to_shape_mesh(mesh);
     SurfaceMesh {
         header: header.clone(),
         stream_id: r.stream.to_string(),
         object_id: r.stream.label.map_or(0, |l| u32::try_from(l).unwrap_or(0)),
-        vertices: mesh
-            .vertices
-            .iter()
-            .map(|v| Point {
-                x: v.x,
-                y: v.y,
-                z: v.z,
-            })
-            .collect(),
-        triangles: mesh
-            .triangles
-            .iter()
-            .map(|t| MeshTriangle { vertex_indices: *t })
-            .collect(),
+        vertices: geometry.vertices,
+        triangles: geometry.triangles,
         vertex_separability: mesh.scalar(SEPARABILITY).map(<[f32]>::to_vec).unwrap_or_default(),
         global_separability: rec.report.eta_final as f32,
         grid_m: rec.report.grid[0] as u32,
@@ -88,58 +75,34 @@ fn ramp(s: f32) -> ColorRGBA {
     }
 }
 
-/// One TRIANGLE_LIST marker for a frame's mesh (namespace `ns`).
+/// One TRIANGLE_LIST marker for a frame's mesh (namespace `ns`), coloured
+/// per vertex by its separability.
 pub fn triangle_marker(r: &FrameResult, header: &Header, ns: &str) -> Marker {
     let mesh = &r.reconstruction.mesh;
-    let sep = mesh.scalar(SEPARABILITY);
-    let mut points = Vec::with_capacity(mesh.triangles.len() * 3);
-    let mut colors = Vec::with_capacity(if sep.is_some() { mesh.triangles.len() * 3 } else { 0 });
-    for t in &mesh.triangles {
-        for &i in t {
-            let v = mesh.vertices[i as usize];
-            points.push(Point {
-                x: v.x,
-                y: v.y,
-                z: v.z,
-            });
-            if let Some(s) = sep {
-                colors.push(ramp(s[i as usize]));
-            }
-        }
+    let base = ColorRGBA {
+        r: 0.2,
+        g: 0.7,
+        b: 0.9,
+        a: 1.0,
+    };
+    let mut marker = to_triangle_list_marker(mesh, header.clone(), ns, marker_id(&r.stream.to_string()), base);
+    if let Some(sep) = mesh.scalar(SEPARABILITY) {
+        marker.colors = mesh
+            .triangles
+            .iter()
+            .flat_map(|t| t.map(|i| ramp(sep.get(i as usize).copied().unwrap_or(0.0))))
+            .collect();
     }
-    Marker {
-        header: header.clone(),
-        ns: ns.to_string(),
-        id: marker_id(&r.stream.to_string()),
-        type_: Marker::TRIANGLE_LIST,
-        action: Marker::ADD,
-        scale: Vector3 {
-            x: 1.0,
-            y: 1.0,
-            z: 1.0,
-        },
-        color: ColorRGBA {
-            r: 0.2,
-            g: 0.7,
-            b: 0.9,
-            a: 1.0,
-        },
-        points,
-        colors,
-        ..Marker::default()
-    }
+    marker
 }
 
 /// A marker array that first clears the namespace (DELETEALL, so vanished
 /// objects disappear) and then adds one marker per current object.
 pub fn marker_array(results: &[&FrameResult], header: &Header, ns: &str) -> MarkerArray {
     let mut markers = Vec::with_capacity(results.len() + 1);
-    markers.push(Marker {
-        header: header.clone(),
-        ns: ns.to_string(),
-        action: Marker::DELETEALL,
-        ..Marker::default()
-    });
+    let mut clear = delete_all_marker(header.clone());
+    clear.ns = ns.to_string();
+    markers.push(clear);
     markers.extend(results.iter().map(|r| triangle_marker(r, header, ns)));
     MarkerArray { markers }
 }
