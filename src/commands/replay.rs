@@ -23,7 +23,13 @@ pub fn percentile(sorted: &[f64], q: f64) -> f64 {
 }
 
 /// Replay `bag`, optionally writing an output bag and restricting topics.
-pub fn run(bag_path: &Path, out: Option<&Path>, topics: &[String], cfg: &Config, quiet: bool) -> Result<()> {
+pub fn run(
+    bag_path: &Path,
+    out: Option<&Path>,
+    topics: &[String],
+    cfg: &Config,
+    quiet: bool,
+) -> Result<()> {
     let bag = Bag::open(bag_path).with_context(|| format!("opening bag {}", bag_path.display()))?;
     let cloud_topics: Vec<&str> = bag
         .topics
@@ -36,12 +42,18 @@ pub fn run(bag_path: &Path, out: Option<&Path>, topics: &[String], cfg: &Config,
         bail!(
             "no {POINTCLOUD2} topic to replay in {} (topics: {})",
             bag_path.display(),
-            bag.topics.iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", ")
+            bag.topics
+                .iter()
+                .map(|t| t.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
         );
     }
     let messages = bag.read(&cloud_topics)?;
     let mut writer = out
-        .map(|p| BagWriter::create(p).with_context(|| format!("creating output bag {}", p.display())))
+        .map(|p| {
+            BagWriter::create(p).with_context(|| format!("creating output bag {}", p.display()))
+        })
         .transpose()?;
     let mut engine = Engine::new(cfg.membrane.clone(), cfg.pipeline.clone(), cfg.wire.clone());
     let p = &cfg.pipeline;
@@ -91,7 +103,11 @@ pub fn run(bag_path: &Path, out: Option<&Path>, topics: &[String], cfg: &Config,
                         pr.key.to_string(),
                         r.frame,
                         pr.points,
-                        if r.path == StartPath::Warm { "warm" } else { "cold" },
+                        if r.path == StartPath::Warm {
+                            "warm"
+                        } else {
+                            "cold"
+                        },
                         r.reason.to_string(),
                         r.iterations,
                         r.reconstruction.report.eta_final,
@@ -107,11 +123,20 @@ pub fn run(bag_path: &Path, out: Option<&Path>, topics: &[String], cfg: &Config,
         }
         if let Some(w) = writer.as_mut() {
             for r in &ok {
-                w.write(&p.mesh_topic, m.log_time, &outputs::surface_mesh(r, &sample.header))?;
+                w.write(
+                    &p.mesh_topic,
+                    m.log_time,
+                    &outputs::surface_mesh(r, &sample.header),
+                )?;
                 w.write(
                     &p.frame_diagnostics_topic,
                     m.log_time,
-                    &outputs::frame_diagnostics(r, &sample.header, sample.points_in, sample.dropped),
+                    &outputs::frame_diagnostics(
+                        r,
+                        &sample.header,
+                        sample.points_in,
+                        sample.dropped,
+                    ),
                 )?;
             }
             w.write(
@@ -123,7 +148,13 @@ pub fn run(bag_path: &Path, out: Option<&Path>, topics: &[String], cfg: &Config,
     }
     bar.finish_and_clear();
     latencies.sort_by(f64::total_cmp);
-    let mean = |v: &[f64]| if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 };
+    let mean = |v: &[f64]| {
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
     println!(
         "summary: {} samples, {} frames ok ({} warm, {} cold), {} failed, {} bad samples; latency ms p50 {:.1} p95 {:.1} max {:.1}; mean iterations warm {:.1} cold {:.1}",
         messages.len(),
@@ -140,7 +171,11 @@ pub fn run(bag_path: &Path, out: Option<&Path>, topics: &[String], cfg: &Config,
     );
     if let Some(w) = writer {
         let s = w.finish()?;
-        println!("wrote {} ({} topics)", s.mcap_path.display(), s.counts.len());
+        println!(
+            "wrote {} ({} topics)",
+            s.mcap_path.display(),
+            s.counts.len()
+        );
     }
     Ok(())
 }

@@ -151,7 +151,9 @@ mod tests {
             .collect();
         let a = align(&model, &data, Rigid::identity(), 15, 0.2, 2000);
         for p in &model {
-            let err = (a.motion.transform_point(&(*p).into()) - truth.transform_point(&(*p).into())).norm();
+            let err = (a.motion.transform_point(&(*p).into())
+                - truth.transform_point(&(*p).into()))
+            .norm();
             assert!(err < 0.02, "residual motion error {err}");
         }
         assert!(a.inlier_fraction > 0.9);

@@ -8,26 +8,19 @@
 use super::{PipelineConfig, PipelineError, StreamKey, Tracker};
 use crate::cloud::PointCloud;
 use crate::membrane::MembraneConfig;
-use crate::wire::msgs::{Header, PointCloud2};
-use crate::wire::pointcloud2::{decode_pointcloud2, split_by_label, PointCloud2Error, WireConfig};
-use crate::wire::{self, WireError};
+use crate::wire::msgs::Header;
+use crate::wire::pointcloud2::{
+    decode_pointcloud2_cdr, split_by_label, PointCloud2Error, WireConfig,
+};
 use std::collections::BTreeMap;
 use thiserror::Error;
 
 /// A sample that could not be turned into clouds.
 #[derive(Debug, Error)]
 pub enum SampleError {
-    /// The bytes are not a CDR PointCloud2.
+    /// The bytes are not a valid CDR PointCloud2, or it is over the limits.
     #[error("topic {topic}: {source}")]
-    Cdr {
-        /// Topic.
-        topic: String,
-        /// Cause.
-        source: WireError,
-    },
-    /// The PointCloud2 layout is invalid or over the limits.
-    #[error("topic {topic}: {source}")]
-    Layout {
+    Invalid {
         /// Topic.
         topic: String,
         /// Cause.
@@ -67,16 +60,12 @@ pub fn decode_sample(
     limits: &WireConfig,
     cfg: &PipelineConfig,
 ) -> Result<DecodedSample, SampleError> {
-    let msg: PointCloud2 = wire::decode(cdr).map_err(|source| SampleError::Cdr {
-        topic: topic.to_string(),
-        source,
-    })?;
-    let decoded = decode_pointcloud2(&msg, limits).map_err(|source| SampleError::Layout {
+    let decoded = decode_pointcloud2_cdr(cdr, limits).map_err(|source| SampleError::Invalid {
         topic: topic.to_string(),
         source,
     })?;
     Ok(DecodedSample {
-        header: msg.header,
+        header: decoded.header,
         points_in: decoded.points_in,
         dropped: decoded.dropped_non_finite,
         streams: split_streams(topic, decoded.cloud, cfg),
@@ -146,13 +135,14 @@ impl Engine {
     /// # Errors
     /// [`SampleError`] when the sample cannot be decoded; per-stream failures
     /// are reported inside the returned [`Processed`] items instead.
-    pub fn handle(&mut self, topic: &str, cdr: &[u8]) -> Result<(DecodedSample, Vec<Processed>), SampleError> {
+    pub fn handle(
+        &mut self,
+        topic: &str,
+        cdr: &[u8],
+    ) -> Result<(DecodedSample, Vec<Processed>), SampleError> {
         let mut sample = decode_sample(topic, cdr, &self.limits, &self.pipeline)?;
         let streams = std::mem::take(&mut sample.streams);
-        let out = streams
-            .into_iter()
-            .map(|s| self.process(s))
-            .collect();
+        let out = streams.into_iter().map(|s| self.process(s)).collect();
         Ok((sample, out))
     }
 

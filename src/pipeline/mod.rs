@@ -326,8 +326,8 @@ impl Tracker {
                 min: cfg.min_points.max(4),
             });
         }
-        let deadline = (cfg.deadline_ms > 0.0)
-            .then(|| start + Duration::from_secs_f64(cfg.deadline_ms / 1e3));
+        let deadline =
+            (cfg.deadline_ms > 0.0).then(|| start + Duration::from_secs_f64(cfg.deadline_ms / 1e3));
         let centroid = cloud.centroid().unwrap_or_else(Vec3::zeros);
         let size = cloud.aabb().longest_edge();
 
@@ -398,7 +398,12 @@ impl Tracker {
         centroid: Vec3,
         size: f64,
         cfg: &PipelineConfig,
-    ) -> (StartPath, PathReason, Option<WarmStart>, Option<align::Rigid>) {
+    ) -> (
+        StartPath,
+        PathReason,
+        Option<WarmStart>,
+        Option<align::Rigid>,
+    ) {
         let cold = |reason| (StartPath::Cold, reason, None, None);
         if !cfg.warm_start {
             return cold(PathReason::WarmDisabled);

@@ -24,7 +24,10 @@ pub fn surface_mesh(r: &FrameResult, header: &Header) -> SurfaceMesh {
         object_id: r.stream.label.map_or(0, |l| u32::try_from(l).unwrap_or(0)),
         vertices: geometry.vertices,
         triangles: geometry.triangles,
-        vertex_separability: mesh.scalar(SEPARABILITY).map(<[f32]>::to_vec).unwrap_or_default(),
+        vertex_separability: mesh
+            .scalar(SEPARABILITY)
+            .map(<[f32]>::to_vec)
+            .unwrap_or_default(),
         global_separability: rec.report.eta_final as f32,
         grid_m: rec.report.grid[0] as u32,
         grid_l: rec.report.grid[1] as u32,
@@ -36,7 +39,12 @@ pub fn surface_mesh(r: &FrameResult, header: &Header) -> SurfaceMesh {
 }
 
 /// The per-frame diagnostics message.
-pub fn frame_diagnostics(r: &FrameResult, header: &Header, points_in: usize, dropped: usize) -> FrameDiagnostics {
+pub fn frame_diagnostics(
+    r: &FrameResult,
+    header: &Header,
+    points_in: usize,
+    dropped: usize,
+) -> FrameDiagnostics {
     let rep = &r.reconstruction.report;
     FrameDiagnostics {
         header: header.clone(),
@@ -85,7 +93,13 @@ pub fn triangle_marker(r: &FrameResult, header: &Header, ns: &str) -> Marker {
         b: 0.9,
         a: 1.0,
     };
-    let mut marker = to_triangle_list_marker(mesh, header.clone(), ns, marker_id(&r.stream.to_string()), base);
+    let mut marker = to_triangle_list_marker(
+        mesh,
+        header.clone(),
+        ns,
+        marker_id(&r.stream.to_string()),
+        base,
+    );
     if let Some(sep) = mesh.scalar(SEPARABILITY) {
         marker.colors = mesh
             .triangles
