@@ -67,6 +67,8 @@ pub struct Config {
     pub density: crate::density::DensityConfig,
     /// Separability search (paper §III-B/C).
     pub separability: crate::separability::SeparabilityConfig,
+    /// Evaluation metrics (`sepmem eval`, benchmarks).
+    pub metrics: crate::metrics::MetricsConfig,
 }
 
 impl Config {
