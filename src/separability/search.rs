@@ -807,8 +807,8 @@ mod tests {
                 .map(|(&t, &i)| (t, f64::from(vals[i as usize])))
                 .collect();
             for (k, st) in scratch.profile().iter().enumerate() {
-                let (a, b): (Vec<&(f64, f64)>, Vec<&(f64, f64)>) =
-                    gathered.iter().partition(|(t, _)| *t < st.offset);
+                type Side<'s> = Vec<&'s (f64, f64)>;
+                let (a, b): (Side, Side) = gathered.iter().partition(|(t, _)| *t < st.offset);
                 let direct = if a.is_empty() || b.is_empty() {
                     0.0
                 } else {
