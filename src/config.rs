@@ -69,6 +69,8 @@ pub struct Config {
     pub separability: crate::separability::SeparabilityConfig,
     /// Evaluation metrics (`sepmem eval`, benchmarks).
     pub metrics: crate::metrics::MetricsConfig,
+    /// The separability membrane (paper §III-D to §III-F): see [`crate::membrane::MembraneConfig`].
+    pub membrane: crate::membrane::MembraneConfig,
     /// ROS 2 wire limits (PointCloud2 decoding).
     pub wire: crate::wire::pointcloud2::WireConfig,
 }
