@@ -14,6 +14,7 @@
 //! | [`config`] | the one annotated configuration (`launch/sepmem.json5`), loading and `--set` overrides |
 //! | [`error`] | the crate-level error type |
 //! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
+//! | [`metrics`] | Chamfer, F-score and normal consistency (ONet/SAP protocol), surface sampling |
 //! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
 //! | [`bench`] | `sepmem bench`: the paper's evaluation, reproduced (input conditions, runner, reports) |
 //! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
@@ -33,6 +34,7 @@ pub mod density;
 pub mod error;
 pub mod membrane;
 pub mod mesh;
+pub mod metrics;
 pub mod pipeline;
 pub mod separability;
 pub mod shapes;
