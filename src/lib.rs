@@ -13,6 +13,8 @@
 //! | [`mesh`] | the indexed triangle mesh produced by the membrane, with per-vertex scalars |
 //! | [`config`] | the one annotated configuration (`launch/sepmem.json5`), loading and `--set` overrides |
 //! | [`error`] | the crate-level error type |
+//! | [`synth`] | depth-camera simulation of moving meshes (visible side, noise, outliers, labels) |
+//! | [`io`] | PLY / PCD / XYZ / OBJ readers, PLY / OBJ / PCD writers |
 //!
 //! Every module's own documentation cites the paper's equations it implements.
 #![cfg_attr(test, allow(clippy::unwrap_used))]
@@ -20,7 +22,9 @@
 pub mod cloud;
 pub mod config;
 pub mod error;
+pub mod io;
 pub mod mesh;
+pub mod synth;
 
 pub use cloud::{Aabb, Attribute, PointCloud, Vec3};
 pub use error::{Error, Result};
