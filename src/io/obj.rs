@@ -21,10 +21,12 @@ use std::path::Path;
 /// # Errors
 /// [`IoError::Obj`] when `tobj` rejects the file (bad numbers, bad indices).
 pub fn parse_mesh(bytes: &[u8], path: &Path) -> Result<LoadedMesh, IoError> {
-    let mut opts = tobj::LoadOptions::default();
-    opts.triangulate = true;
-    opts.ignore_points = true;
-    opts.ignore_lines = true;
+    let opts = tobj::LoadOptions {
+        triangulate: true,
+        ignore_points: true,
+        ignore_lines: true,
+        ..Default::default()
+    };
     let mut reader = std::io::BufReader::new(bytes);
     let (models, _materials) =
         tobj::load_obj_buf(&mut reader, &opts, |_| Err(tobj::LoadError::OpenFileFailed)).map_err(

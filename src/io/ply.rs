@@ -859,7 +859,8 @@ mod tests {
 
     #[test]
     fn malformed_headers_are_typed_errors() {
-        let cases: &[(&str, fn(&IoError) -> bool)] = &[
+        type Check = fn(&IoError) -> bool;
+        let cases: &[(&str, Check)] = &[
             ("plx\n", |e| matches!(e, IoError::BadHeader { .. })),
             ("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n", |e| {
                 matches!(e, IoError::BadHeader { .. })
@@ -874,7 +875,7 @@ mod tests {
                 matches!(e, IoError::Parse { line: 8, .. })
             }),
             ("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n3 0 1 5\n", |e| {
-                matches!(e, IoError::IndexOutOfRange { index: 5, .. })
+                matches!(e, IoError::IndexOutOfRange { index: 1, .. })
             }),
         ];
         for (text, ok) in cases {

@@ -392,7 +392,7 @@ impl Renderer {
             let ray = Vec3::new((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1.0);
             let n = self.normals[oi as usize][ti as usize];
             let cos = (n.dot(&ray) / (n.norm() * ray.norm())).abs();
-            if !(cos >= cos_min.max(1e-9)) {
+            if cos.is_nan() || cos < cos_min.max(1e-9) {
                 continue;
             }
             let sigma = scene.noise.sigma(z);
@@ -493,7 +493,7 @@ fn rasterise(
 ) {
     if tri
         .iter()
-        .any(|p| !(p.z >= cam.min_depth) || !p.iter().all(|c| c.is_finite()))
+        .any(|p| !p.iter().all(|c| c.is_finite()) || p.z < cam.min_depth)
     {
         return; // behind or too close to the camera: not measurable
     }
