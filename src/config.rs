@@ -62,7 +62,12 @@ pub enum ConfigError {
 /// Every sepmem parameter. Sections are documented in `launch/sepmem.json5`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Config {}
+pub struct Config {
+    /// Point density estimation (paper §III-A).
+    pub density: crate::density::DensityConfig,
+    /// Separability search (paper §III-B/C).
+    pub separability: crate::separability::SeparabilityConfig,
+}
 
 impl Config {
     /// Load the defaults, then `path` (if any), then the `sets` overrides.

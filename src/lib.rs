@@ -15,15 +15,23 @@
 //! | [`error`] | the crate-level error type |
 //! | [`synth`] | depth-camera simulation of moving meshes (visible side, noise, outliers, labels) |
 //! | [`io`] | PLY / PCD / XYZ / OBJ readers, PLY / OBJ / PCD writers |
+//! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
+//! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
+//! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
+//! | [`spline`] | the closed cubic B-spline surface (Eq. 10), its least-squares fit and growth |
 //!
 //! Every module's own documentation cites the paper's equations it implements.
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
 pub mod cloud;
 pub mod config;
+pub mod density;
 pub mod error;
 pub mod io;
 pub mod mesh;
+pub mod separability;
+pub mod shapes;
+pub mod spline;
 pub mod synth;
 
 pub use cloud::{Aabb, Attribute, PointCloud, Vec3};
