@@ -67,6 +67,8 @@ pub struct Config {
     pub density: crate::density::DensityConfig,
     /// Separability search (paper §III-B/C).
     pub separability: crate::separability::SeparabilityConfig,
+    /// ROS 2 wire limits (PointCloud2 decoding).
+    pub wire: crate::wire::pointcloud2::WireConfig,
 }
 
 impl Config {

@@ -19,6 +19,12 @@ pub enum Error {
     /// A file could not be read or written.
     #[error(transparent)]
     Io(#[from] crate::io::IoError),
+    /// A ROS 2 message could not be encoded or decoded.
+    #[error(transparent)]
+    Wire(#[from] crate::wire::WireError),
+    /// A PointCloud2 could not be turned into points.
+    #[error(transparent)]
+    PointCloud2(#[from] crate::wire::pointcloud2::PointCloud2Error),
 }
 
 /// Result alias using the crate-level [`Error`].
