@@ -17,6 +17,7 @@
 //! | [`io`] | PLY / PCD / XYZ / OBJ readers, PLY / OBJ / PCD writers |
 //! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
 //! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
+//! | [`bench`] | `sepmem bench`: the paper's evaluation, reproduced (input conditions, runner, reports) |
 //! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
 //! | [`spline`] | the closed cubic B-spline surface (Eq. 10), its least-squares fit and growth |
 //! | [`bag`] | rosbag2 bags: MCAP and sqlite3 reading, MCAP writing with ROS 2 schemas |
@@ -26,6 +27,7 @@
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
 pub mod bag;
+pub mod bench;
 pub mod cloud;
 pub mod config;
 pub mod density;
