@@ -16,6 +16,7 @@
 //! | [`synth`] | depth-camera simulation of moving meshes (visible side, noise, outliers, labels) |
 //! | [`io`] | PLY / PCD / XYZ / OBJ readers, PLY / OBJ / PCD writers |
 //! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
+//! | [`metrics`] | Chamfer, F-score and normal consistency (ONet/SAP protocol), surface sampling |
 //! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
 //! | [`bench`] | `sepmem bench`: the paper's evaluation, reproduced (input conditions, runner, reports) |
 //! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
@@ -36,6 +37,7 @@ pub mod error;
 pub mod io;
 pub mod membrane;
 pub mod mesh;
+pub mod metrics;
 pub mod separability;
 pub mod shapes;
 pub mod spline;
