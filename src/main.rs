@@ -32,6 +32,16 @@ enum Command {
         #[arg(long)]
         annotated: bool,
     },
+    /// Demo: replay the bundled sample bags through the pipeline and write
+    /// meshes (PLY) and output bags to a folder. Needs no router or ROS.
+    Demo {
+        /// Output folder.
+        #[arg(short, long, default_value = "demo-out")]
+        out: PathBuf,
+        /// Override one parameter: section.key=value (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+    },
     /// Run the frame pipeline over every PointCloud2 of a rosbag2 bag (MCAP or
     /// db3), deterministically and as fast as possible; print a per-frame table
     /// and a latency summary, and optionally write meshes, markers and
@@ -69,6 +79,10 @@ fn main() -> Result<()> {
             set,
             annotated,
         } => commands::config::run(config.as_deref(), &set, annotated),
+        Command::Demo { out, set } => {
+            let cfg = sepmem::config::Config::load(None, &set)?;
+            commands::demo::run(&out, &cfg)
+        }
         Command::Replay {
             bag,
             out,

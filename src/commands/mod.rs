@@ -1,4 +1,5 @@
 //! One module per `sepmem` subcommand.
 
 pub mod config;
+pub mod demo;
 pub mod replay;

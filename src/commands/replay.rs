@@ -30,6 +30,39 @@ pub fn run(
     cfg: &Config,
     quiet: bool,
 ) -> Result<()> {
+    run_with(
+        bag_path,
+        Outputs {
+            bag: out,
+            meshes: None,
+        },
+        topics,
+        cfg,
+        quiet,
+    )
+}
+
+/// Where a replay writes its results.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Outputs<'a> {
+    /// Output bag with the mesh, marker and diagnostics topics.
+    pub bag: Option<&'a Path>,
+    /// Folder receiving one binary PLY mesh per stream and frame.
+    pub meshes: Option<&'a Path>,
+}
+
+/// Replay `bag` into the given outputs.
+pub fn run_with(
+    bag_path: &Path,
+    outputs_to: Outputs<'_>,
+    topics: &[String],
+    cfg: &Config,
+    quiet: bool,
+) -> Result<()> {
+    let out = outputs_to.bag;
+    if let Some(dir) = outputs_to.meshes {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     let bag = Bag::open(bag_path).with_context(|| format!("opening bag {}", bag_path.display()))?;
     let cloud_topics: Vec<&str> = bag
         .topics
@@ -113,6 +146,17 @@ pub fn run(
                         r.reconstruction.report.eta_final,
                         r.latency_ms
                     ));
+                    if let Some(dir) = outputs_to.meshes {
+                        let name = format!(
+                            "{}_{:04}.ply",
+                            pr.key
+                                .to_string()
+                                .trim_start_matches('/')
+                                .replace(['/', '#'], "_"),
+                            r.frame
+                        );
+                        sepmem::io::save_mesh(dir.join(name), &r.reconstruction.mesh)?;
+                    }
                     ok.push(r);
                 }
                 Err(e) => {

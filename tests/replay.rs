@@ -1,0 +1,183 @@
+//! The frame pipeline over a recorded rosbag2 bag made by an independent
+//! tool (Python `rosbags`, real mOSD tabletop objects): every frame of every
+//! labelled object stream gives a watertight, outward mesh that lies on the
+//! scan, later frames are warm-started, and the outputs written to a bag
+//! read back (here, and with Python `rosbags`/`mcap` when available).
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use kiddo::{KdTree, SquaredEuclidean};
+use sepmem::bag::{Bag, BagWriter};
+use sepmem::config::Config;
+use sepmem::metrics::sample_surface;
+use sepmem::pipeline::engine::{decode_sample, Engine};
+use sepmem::pipeline::{outputs, StartPath};
+use sepmem::wire::msgs::{FrameDiagnostics, MarkerArray, SurfaceMesh};
+use sepmem::wire::{convert, decode};
+
+/// Largest accepted mean distance from the scan points to the mesh, as a
+/// fraction of the object's size. Measured at the time of writing: 0.014 to
+/// 0.031 on the four cylinders and the roll, 0.090 on the cereal box (test0,
+/// label 20), whose flat faces and sharp edges the membrane still rounds off.
+const MAX_SCAN_TO_MESH: f64 = 0.1;
+
+#[test]
+fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
+    let bag = Bag::open(&common::data_dir().join("bags/mosd_rosbags")).unwrap();
+    let messages = bag.read(&[]).unwrap();
+    assert_eq!(messages.len(), 12);
+    // No deadline: the test must not depend on the machine's speed.
+    let cfg = Config::load(None, &["pipeline.deadline_ms=0".into()]).unwrap();
+    let mut engine = Engine::new(cfg.membrane.clone(), cfg.pipeline.clone(), cfg.wire.clone());
+    let dir = tempfile::tempdir().unwrap();
+    let out_path = dir.path().join("out");
+    let mut out = BagWriter::create(&out_path).unwrap();
+    let (mut frames, mut warm, mut worst) = (0, 0, 0.0f64);
+    let mut first_frame = std::collections::BTreeMap::new();
+    for m in &messages {
+        let mut sample = decode_sample(&m.topic, &m.data, &cfg.wire, &cfg.pipeline).unwrap();
+        let streams = std::mem::take(&mut sample.streams);
+        let processed: Vec<_> = streams
+            .into_iter()
+            .map(|s| {
+                let cloud = s.cloud.clone();
+                (cloud, engine.process(s))
+            })
+            .collect();
+        assert!(!processed.is_empty(), "{}: no object stream", m.topic);
+        let mut ok = Vec::new();
+        for (cloud, p) in &processed {
+            let r = p.outcome.as_ref().unwrap();
+            frames += 1;
+            if r.path == StartPath::Warm {
+                warm += 1;
+            }
+            let mesh = &r.reconstruction.mesh;
+            assert!(mesh.topology().is_watertight(), "{}: not watertight", p.key);
+            assert!(mesh.signed_volume() > 0.0, "{}: not outward", p.key);
+            // The mesh lies on the scan: the scan points' mean distance to the
+            // mesh surface is a small fraction of the object size.
+            let size = cloud.aabb().longest_edge();
+            let s = sample_surface(mesh, 20_000, 1).unwrap();
+            let mut tree: KdTree<f64, 3> = KdTree::new();
+            for (i, q) in s.points.iter().enumerate() {
+                tree.add(&[q.x, q.y, q.z], i as u64);
+            }
+            let mean = cloud
+                .points
+                .iter()
+                .map(|p| {
+                    tree.nearest_one::<SquaredEuclidean>(&[p.x, p.y, p.z])
+                        .distance
+                        .sqrt()
+                })
+                .sum::<f64>()
+                / cloud.len() as f64;
+            eprintln!(
+                "{} frame {} ({:?}, {} it): scan-to-mesh mean {:.4} of the object size",
+                p.key,
+                r.frame,
+                r.path,
+                r.iterations,
+                mean / size
+            );
+            worst = worst.max(mean / size);
+            let cold = first_frame.entry(p.key.clone()).or_insert(mean / size);
+            // Warm frames (6 iterations at most) keep the quality of the
+            // stream's cold start (up to 60 iterations).
+            assert!(
+                mean / size <= *cold + 0.01,
+                "{} frame {}: warm {:.4} worse than cold {:.4}",
+                p.key,
+                r.frame,
+                mean / size,
+                cold
+            );
+            ok.push(r);
+        }
+        for r in &ok {
+            out.write(
+                "/sepmem/mesh",
+                m.log_time,
+                &outputs::surface_mesh(r, &sample.header),
+            )
+            .unwrap();
+            out.write(
+                "/sepmem/frame_diagnostics",
+                m.log_time,
+                &outputs::frame_diagnostics(r, &sample.header, sample.points_in, sample.dropped),
+            )
+            .unwrap();
+        }
+        out.write(
+            "/sepmem/markers",
+            m.log_time,
+            &outputs::marker_array(&ok, &sample.header, "sepmem"),
+        )
+        .unwrap();
+    }
+    assert_eq!(frames, 15, "5 labelled objects × 3 frames");
+    // Real one-sided RGB-D views: the visible side must lie on the scan.
+    assert!(
+        worst < MAX_SCAN_TO_MESH,
+        "worst scan-to-mesh mean {worst:.4} of size"
+    );
+    assert_eq!(
+        warm, 8,
+        "every frame after a stream's first is warm-started"
+    );
+    let summary = out.finish().unwrap();
+
+    // Read the outputs back.
+    let back = Bag::open(&out_path).unwrap();
+    let msgs = back.read(&[]).unwrap();
+    assert_eq!(msgs.len(), 42);
+    for m in &msgs {
+        match m.type_name.as_str() {
+            "sepmem_msgs/msg/SurfaceMesh" => {
+                let s: SurfaceMesh = decode(&m.data).unwrap();
+                let mesh = convert::trimesh_from_surface(&s).unwrap();
+                assert!(mesh.topology().is_watertight());
+                assert_eq!(s.vertex_separability.len(), s.vertices.len());
+            }
+            "visualization_msgs/msg/MarkerArray" => {
+                let a: MarkerArray = decode(&m.data).unwrap();
+                assert_eq!(a.markers[0].action, 3, "DELETEALL first");
+                assert_eq!(a.markers[1].points.len() % 3, 0);
+            }
+            "sepmem_msgs/msg/FrameDiagnostics" => {
+                let d: FrameDiagnostics = decode(&m.data).unwrap();
+                assert!(d.points_in > 0 && d.iterations > 0);
+            }
+            other => panic!("unexpected type {other}"),
+        }
+    }
+    // Independent reader, when Python rosbags/mcap are installed.
+    let ok = std::process::Command::new("python3")
+        .args(["-c", "import rosbags, mcap"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if ok {
+        let script =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/check_bag.py");
+        let o = std::process::Command::new("python3")
+            .arg(script)
+            .arg(&out_path)
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "check_bag.py: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            text.contains("OK rosbags+mcap: 3 topics, 42 messages decoded"),
+            "{text}"
+        );
+    } else {
+        eprintln!("SKIPPED external bag check: python3 with rosbags and mcap not available");
+    }
+    let _ = summary;
+}
