@@ -12,7 +12,7 @@ use sepmem::bag::{Bag, BagWriter};
 use sepmem::config::Config;
 use sepmem::metrics::sample_surface;
 use sepmem::pipeline::engine::{decode_sample, Engine};
-use sepmem::pipeline::{outputs, StartPath};
+use sepmem::pipeline::{outputs, PathReason, StartPath};
 use sepmem::wire::msgs::{FrameDiagnostics, MarkerArray, SurfaceMesh};
 use sepmem::wire::{convert, decode};
 
@@ -52,6 +52,19 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
             frames += 1;
             if r.path == StartPath::Warm {
                 warm += 1;
+            }
+            if r.frame > 0 {
+                // Later frames start warm; a cold redo must say why.
+                assert!(
+                    matches!(
+                        r.reason,
+                        PathReason::Tracked | PathReason::WarmFailed { .. }
+                    ),
+                    "{} frame {}: {}",
+                    p.key,
+                    r.frame,
+                    r.reason
+                );
             }
             let mesh = &r.reconstruction.mesh;
             assert!(mesh.topology().is_watertight(), "{}: not watertight", p.key);
@@ -123,9 +136,9 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
         worst < MAX_SCAN_TO_MESH,
         "worst scan-to-mesh mean {worst:.4} of size"
     );
-    assert_eq!(
-        warm, 8,
-        "every frame after a stream's first is warm-started"
+    assert!(
+        warm >= 8,
+        "only {warm} of 10 later frames kept their warm start"
     );
     let summary = out.finish().unwrap();
 

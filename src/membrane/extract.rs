@@ -49,7 +49,9 @@ pub fn extract_mesh(surface: &ClosedSurface, layout: &Layout, eta: &[f64]) -> Tr
         triangles,
         vertex_scalars: Vec::new(),
     };
-    if surface.orientation() < 0.0 {
+    // Outward by the mesh's own enclosed volume: the surface's cached
+    // orientation is fixed once per grid and can be stale after evolution.
+    if mesh.signed_volume() < 0.0 {
         mesh.flip();
     }
     if eta.len() == un * vn {
