@@ -16,6 +16,7 @@
 //! | [`synth`] | depth-camera simulation of moving meshes (visible side, noise, outliers, labels) |
 //! | [`io`] | PLY / PCD / XYZ / OBJ readers, PLY / OBJ / PCD writers |
 //! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
+//! | [`metrics`] | Chamfer, F-score and normal consistency (ONet/SAP protocol), surface sampling |
 //! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
 //! | [`bench`] | `sepmem bench`: the paper's evaluation, reproduced (input conditions, runner, reports) |
 //! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
@@ -23,6 +24,7 @@
 //! | [`spline`] | the closed cubic B-spline surface (Eq. 10), its least-squares fit and growth |
 //! | [`bag`] | rosbag2 bags: MCAP and sqlite3 reading, MCAP writing with ROS 2 schemas |
 //! | [`wire`] | ROS 2 messages, CDR codec, RIHS01 type hashes, PointCloud2 ↔ points |
+//! | [`pipeline`] | the frame pipeline: per-stream trackers, warm start with motion compensation, outputs, replay engine |
 //!
 //! Every module's own documentation cites the paper's equations it implements.
 #![cfg_attr(test, allow(clippy::unwrap_used))]
@@ -36,6 +38,7 @@ pub mod error;
 pub mod io;
 pub mod membrane;
 pub mod mesh;
+pub mod metrics;
 pub mod pipeline;
 pub mod separability;
 pub mod shapes;
