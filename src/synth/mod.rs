@@ -19,6 +19,9 @@
 //! every frame can be scored. Everything is deterministic for a seed
 //! (ChaCha8, one stream per frame).
 
+pub mod sequence;
+pub mod truth;
+
 use crate::cloud::{Aabb, Attribute, PointCloud, Vec3};
 use crate::mesh::TriMesh;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
