@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 /// The sample bags shipped in the repository, in demo order.
 fn bundled_bags() -> Vec<PathBuf> {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/bags");
-    let mut bags: Vec<PathBuf> = ["mosd_rosbags", "synth_single", "synth_labelled"]
+    let mut bags: Vec<PathBuf> = ["mosd_rosbags", "synth_ellipsoid.mcap", "synth_two_labelled.mcap"]
         .iter()
         .map(|n| root.join(n))
         .filter(|p| p.exists())
@@ -28,7 +28,7 @@ pub fn run(out: &Path, cfg: &Config) -> Result<()> {
         bail!("no bundled sample bag found under tests/data/bags (run from a sepmem checkout)");
     }
     for bag in &bags {
-        let name = bag.file_name().and_then(|n| n.to_str()).unwrap_or("bag");
+        let name = bag.file_stem().and_then(|n| n.to_str()).unwrap_or("bag");
         let dir = out.join(name);
         let out_bag = dir.join(format!("{name}_sepmem.mcap"));
         let meshes = dir.join("meshes");

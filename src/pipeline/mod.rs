@@ -78,7 +78,7 @@ impl Default for PipelineConfig {
         Self {
             split_by_label: true,
             label_channel: "label".into(),
-            ignore_labels: Vec::new(),
+            ignore_labels: vec![0],
             min_points: 50,
             warm_start: true,
             warm_max_iterations: 6,
