@@ -12,11 +12,15 @@ use std::path::{Path, PathBuf};
 /// The sample bags shipped in the repository, in demo order.
 fn bundled_bags() -> Vec<PathBuf> {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/bags");
-    let mut bags: Vec<PathBuf> = ["mosd_rosbags", "synth_ellipsoid.mcap", "synth_two_labelled.mcap"]
-        .iter()
-        .map(|n| root.join(n))
-        .filter(|p| p.exists())
-        .collect();
+    let mut bags: Vec<PathBuf> = [
+        "mosd_rosbags",
+        "synth_ellipsoid.mcap",
+        "synth_two_labelled.mcap",
+    ]
+    .iter()
+    .map(|n| root.join(n))
+    .filter(|p| p.exists())
+    .collect();
     bags.dedup();
     bags
 }
