@@ -62,7 +62,10 @@ pub enum ConfigError {
 /// Every sepmem parameter. Sections are documented in `launch/sepmem.json5`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Config {}
+pub struct Config {
+    /// The live node (`sepmem node`): topics, outputs, real-time bounds, sharding, transport.
+    pub node: crate::node::NodeConfig,
+}
 
 impl Config {
     /// Load the defaults, then `path` (if any), then the `sets` overrides.

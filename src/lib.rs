@@ -13,6 +13,8 @@
 //! | [`mesh`] | the indexed triangle mesh produced by the membrane, with per-vertex scalars |
 //! | [`config`] | the one annotated configuration (`launch/sepmem.json5`), loading and `--set` overrides |
 //! | [`error`] | the crate-level error type |
+//! | [`node`] | the live node: per-stream keep-latest slots, rayon compute, diagnostics, eviction, sharding |
+//! | [`transport`] | ROS 2 wire compatibility over zenoh: rmw_zenoh keys, attachments, liveliness tokens; sessions |
 //!
 //! Every module's own documentation cites the paper's equations it implements.
 #![cfg_attr(test, allow(clippy::unwrap_used))]
@@ -21,6 +23,8 @@ pub mod cloud;
 pub mod config;
 pub mod error;
 pub mod mesh;
+pub mod node;
+pub mod transport;
 
 pub use cloud::{Aabb, Attribute, PointCloud, Vec3};
 pub use error::{Error, Result};
