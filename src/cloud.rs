@@ -287,7 +287,7 @@ impl PointCloud {
         let bb = self.aabb();
         let e = bb.extent();
         let longest = e.max();
-        if !(longest > 0.0) || e.min() < 1e-6 * longest {
+        if longest.is_nan() || longest <= 0.0 || e.min() < 1e-6 * longest {
             return Err(CloudError::Degenerate {
                 extent: [e.x, e.y, e.z],
             });

@@ -63,6 +63,12 @@ pub enum ConfigError {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Config {
+    /// Point density estimation (paper §III-A).
+    pub density: crate::density::DensityConfig,
+    /// Separability search (paper §III-B/C).
+    pub separability: crate::separability::SeparabilityConfig,
+    /// ROS 2 wire limits (PointCloud2 decoding).
+    pub wire: crate::wire::pointcloud2::WireConfig,
     /// The live node (`sepmem node`): topics, outputs, real-time bounds, sharding, transport.
     pub node: crate::node::NodeConfig,
 }
@@ -176,7 +182,7 @@ mod tests {
     #[test]
     fn unknown_keys_are_rejected_with_their_name() {
         let err = Config::load(None, &["no_such.section=1".into()]).unwrap_err();
-        assert!(err.to_string().contains("no_such.section"), "{err}");
+        assert!(err.to_string().contains("`no_such`"), "{err}");
         let err = Config::load(None, &["missing_equals".into()]).unwrap_err();
         assert!(matches!(err, ConfigError::BadOverride(_)));
     }

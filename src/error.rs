@@ -16,6 +16,12 @@ pub enum Error {
     /// An input cloud or mesh was unusable (empty, degenerate, inconsistent).
     #[error(transparent)]
     Cloud(#[from] crate::cloud::CloudError),
+    /// A ROS 2 message could not be encoded or decoded.
+    #[error(transparent)]
+    Wire(#[from] crate::wire::WireError),
+    /// A PointCloud2 could not be turned into points.
+    #[error(transparent)]
+    PointCloud2(#[from] crate::wire::pointcloud2::PointCloud2Error),
 }
 
 /// Result alias using the crate-level [`Error`].

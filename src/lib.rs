@@ -15,16 +15,28 @@
 //! | [`error`] | the crate-level error type |
 //! | [`node`] | the live node: per-stream keep-latest slots, rayon compute, diagnostics, eviction, sharding |
 //! | [`transport`] | ROS 2 wire compatibility over zenoh: rmw_zenoh keys, attachments, liveliness tokens; sessions |
+//! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
+//! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
+//! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
+//! | [`spline`] | the closed cubic B-spline surface (Eq. 10), its least-squares fit and growth |
+//! | [`bag`] | rosbag2 bags: MCAP and sqlite3 reading, MCAP writing with ROS 2 schemas |
+//! | [`wire`] | ROS 2 messages, CDR codec, RIHS01 type hashes, PointCloud2 ↔ points |
 //!
 //! Every module's own documentation cites the paper's equations it implements.
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
+pub mod bag;
 pub mod cloud;
 pub mod config;
+pub mod density;
 pub mod error;
 pub mod mesh;
 pub mod node;
+pub mod separability;
+pub mod shapes;
+pub mod spline;
 pub mod transport;
+pub mod wire;
 
 pub use cloud::{Aabb, Attribute, PointCloud, Vec3};
 pub use error::{Error, Result};

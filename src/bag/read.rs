@@ -1,0 +1,390 @@
+//! Reading rosbag2 bags (MCAP and sqlite3 storage).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use super::metadata::storage_files;
+use super::BagError;
+
+/// Storage plugin of a bag file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Storage {
+    /// `rosbag2_storage_mcap`.
+    Mcap,
+    /// `rosbag2_storage_sqlite3`.
+    Sqlite3,
+}
+
+/// One topic of a bag.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TopicInfo {
+    /// Topic name.
+    pub name: String,
+    /// Message type (`pkg/msg/Name`).
+    pub type_name: String,
+    /// Messages on the topic (over all files).
+    pub message_count: u64,
+    /// `offered_qos_profiles` as stored (YAML), empty when absent.
+    pub offered_qos_profiles: String,
+    /// RIHS01 type hash as stored, empty when absent (Humble bags).
+    pub type_hash: String,
+}
+
+/// One recorded message.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BagMessage {
+    /// Topic name.
+    pub topic: String,
+    /// Message type (`pkg/msg/Name`).
+    pub type_name: String,
+    /// Receive time, ns since the epoch.
+    pub log_time: u64,
+    /// Send time, ns since the epoch (sqlite3 bags: same as `log_time`).
+    pub publish_time: u64,
+    /// CDR bytes including the encapsulation header.
+    pub data: Vec<u8>,
+}
+
+/// An opened bag: its storage files and topics.
+#[derive(Debug, Clone)]
+pub struct Bag {
+    /// Path given to [`Bag::open`].
+    pub path: PathBuf,
+    /// Storage plugin.
+    pub storage: Storage,
+    /// Storage files, in order.
+    pub files: Vec<PathBuf>,
+    /// Topics with message encoding `cdr`, sorted by name.
+    pub topics: Vec<TopicInfo>,
+    /// Topics skipped because their encoding is not `cdr`.
+    pub skipped_topics: Vec<String>,
+}
+
+fn storage_of(path: &Path) -> Option<Storage> {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("mcap") => Some(Storage::Mcap),
+        Some("db3") => Some(Storage::Sqlite3),
+        _ => None,
+    }
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> BagError + '_ {
+    move |source| BagError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+fn mcap_err(path: &Path) -> impl Fn(mcap::McapError) -> BagError + '_ {
+    move |e| BagError::Mcap {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+fn sql_err(path: &Path) -> impl Fn(rusqlite::Error) -> BagError + '_ {
+    move |e| BagError::Sqlite {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+impl Bag {
+    /// Open a bag file (`.mcap`, `.db3`) or bag directory and list its topics.
+    ///
+    /// # Errors
+    /// [`BagError`] when the path is not a readable rosbag2 bag.
+    pub fn open(path: &Path) -> Result<Self, BagError> {
+        let (storage, files) = if path.is_dir() {
+            Self::directory_files(path)?
+        } else {
+            let s = storage_of(path).ok_or_else(|| BagError::NotABag {
+                path: path.to_path_buf(),
+            })?;
+            if !path.is_file() {
+                return Err(BagError::Io {
+                    path: path.to_path_buf(),
+                    source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+                });
+            }
+            (s, vec![path.to_path_buf()])
+        };
+        let mut topics: BTreeMap<String, TopicInfo> = BTreeMap::new();
+        let mut skipped = Vec::new();
+        for f in &files {
+            let found = match storage {
+                Storage::Mcap => mcap_topics(f, &mut skipped)?,
+                Storage::Sqlite3 => sqlite_topics(f)?,
+            };
+            for t in found {
+                topics
+                    .entry(t.name.clone())
+                    .and_modify(|e| e.message_count += t.message_count)
+                    .or_insert(t);
+            }
+        }
+        skipped.sort();
+        skipped.dedup();
+        Ok(Self {
+            path: path.to_path_buf(),
+            storage,
+            files,
+            topics: topics.into_values().collect(),
+            skipped_topics: skipped,
+        })
+    }
+
+    fn directory_files(dir: &Path) -> Result<(Storage, Vec<PathBuf>), BagError> {
+        let meta = dir.join("metadata.yaml");
+        if meta.is_file() {
+            let text = std::fs::read_to_string(&meta).map_err(io_err(&meta))?;
+            let (id, rel) = storage_files(&text);
+            let files: Vec<PathBuf> = rel.iter().map(|r| dir.join(r)).collect();
+            let storage = match id.as_deref() {
+                Some("mcap") => Some(Storage::Mcap),
+                Some("sqlite3") => Some(Storage::Sqlite3),
+                _ => files.first().and_then(|f| storage_of(f)),
+            };
+            if let Some(s) = storage {
+                if !files.is_empty() && files.iter().all(|f| f.is_file()) {
+                    return Ok((s, files));
+                }
+            }
+        }
+        // No (usable) metadata.yaml: take the storage files in name order.
+        let mut found: Vec<PathBuf> = std::fs::read_dir(dir)
+            .map_err(io_err(dir))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| storage_of(p).is_some())
+            .collect();
+        found.sort();
+        let storage =
+            found
+                .first()
+                .and_then(|f| storage_of(f))
+                .ok_or_else(|| BagError::NotABag {
+                    path: dir.to_path_buf(),
+                })?;
+        found.retain(|f| storage_of(f) == Some(storage));
+        Ok((storage, found))
+    }
+
+    /// The topic named `name`.
+    pub fn topic(&self, name: &str) -> Option<&TopicInfo> {
+        self.topics.iter().find(|t| t.name == name)
+    }
+
+    /// Total message count over the readable topics.
+    pub fn message_count(&self) -> u64 {
+        self.topics.iter().map(|t| t.message_count).sum()
+    }
+
+    /// Every message of `topics` (all readable topics when empty), sorted by
+    /// log time (stable).
+    ///
+    /// # Errors
+    /// [`BagError`] when a storage file is unreadable or corrupt.
+    pub fn read(&self, topics: &[&str]) -> Result<Vec<BagMessage>, BagError> {
+        let wanted = |t: &str| topics.is_empty() || topics.contains(&t);
+        let mut out = Vec::new();
+        for f in &self.files {
+            match self.storage {
+                Storage::Mcap => read_mcap(f, &wanted, &mut out)?,
+                Storage::Sqlite3 => read_sqlite(f, &wanted, &mut out)?,
+            }
+        }
+        out.sort_by_key(|m| m.log_time);
+        Ok(out)
+    }
+}
+
+struct ChannelInfo {
+    topic: String,
+    type_name: String,
+    message_encoding: String,
+    qos: String,
+    hash: String,
+}
+
+impl ChannelInfo {
+    fn of(ch: &mcap::Channel<'_>) -> Self {
+        let meta = |k: &str| ch.metadata.get(k).cloned().unwrap_or_default();
+        Self {
+            topic: ch.topic.clone(),
+            type_name: ch
+                .schema
+                .as_ref()
+                .map(|s| s.name.clone())
+                .unwrap_or_default(),
+            message_encoding: ch.message_encoding.clone(),
+            qos: meta("offered_qos_profiles"),
+            hash: meta("topic_type_hash"),
+        }
+    }
+}
+
+fn mcap_topics(path: &Path, skipped: &mut Vec<String>) -> Result<Vec<TopicInfo>, BagError> {
+    let buf = std::fs::read(path).map_err(io_err(path))?;
+    let mut counts: BTreeMap<u16, u64> = BTreeMap::new();
+    let mut channels: BTreeMap<u16, ChannelInfo> = BTreeMap::new();
+    match mcap::Summary::read(&buf).map_err(mcap_err(path))? {
+        Some(summary) if summary.stats.is_some() => {
+            if let Some(stats) = &summary.stats {
+                counts = stats.channel_message_counts.clone();
+            }
+            for (id, ch) in &summary.channels {
+                channels.insert(*id, ChannelInfo::of(ch));
+            }
+        }
+        _ => {
+            for m in mcap::MessageStream::new(&buf).map_err(mcap_err(path))? {
+                let m = m.map_err(mcap_err(path))?;
+                *counts.entry(m.channel.id).or_default() += 1;
+                channels
+                    .entry(m.channel.id)
+                    .or_insert_with(|| ChannelInfo::of(&m.channel));
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for (id, ch) in channels {
+        if ch.message_encoding != "cdr" {
+            skipped.push(ch.topic.clone());
+            continue;
+        }
+        out.push(TopicInfo {
+            name: ch.topic,
+            type_name: ch.type_name,
+            message_count: counts.get(&id).copied().unwrap_or(0),
+            offered_qos_profiles: ch.qos,
+            type_hash: ch.hash,
+        });
+    }
+    // Several channels may share a topic (e.g. after a restart): merge.
+    let mut merged: BTreeMap<String, TopicInfo> = BTreeMap::new();
+    for t in out {
+        merged
+            .entry(t.name.clone())
+            .and_modify(|e| e.message_count += t.message_count)
+            .or_insert(t);
+    }
+    Ok(merged.into_values().collect())
+}
+
+fn read_mcap(
+    path: &Path,
+    wanted: &dyn Fn(&str) -> bool,
+    out: &mut Vec<BagMessage>,
+) -> Result<(), BagError> {
+    let buf = std::fs::read(path).map_err(io_err(path))?;
+    for m in mcap::MessageStream::new(&buf).map_err(mcap_err(path))? {
+        let m = m.map_err(mcap_err(path))?;
+        if m.channel.message_encoding != "cdr" || !wanted(&m.channel.topic) {
+            continue;
+        }
+        out.push(BagMessage {
+            topic: m.channel.topic.clone(),
+            type_name: m
+                .channel
+                .schema
+                .as_ref()
+                .map(|s| s.name.clone())
+                .unwrap_or_default(),
+            log_time: m.log_time,
+            publish_time: m.publish_time,
+            data: m.data.into_owned(),
+        });
+    }
+    Ok(())
+}
+
+fn open_sqlite(path: &Path) -> Result<rusqlite::Connection, BagError> {
+    rusqlite::Connection::open_with_flags(path, rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY)
+        .map_err(sql_err(path))
+}
+
+fn has_column(conn: &rusqlite::Connection, table: &str, column: &str) -> bool {
+    conn.prepare(&format!("SELECT {column} FROM {table} LIMIT 0"))
+        .is_ok()
+}
+
+fn sqlite_topics(path: &Path) -> Result<Vec<TopicInfo>, BagError> {
+    let conn = open_sqlite(path)?;
+    let hash_col = if has_column(&conn, "topics", "type_description_hash") {
+        "t.type_description_hash"
+    } else {
+        "''"
+    };
+    let qos_col = if has_column(&conn, "topics", "offered_qos_profiles") {
+        "t.offered_qos_profiles"
+    } else {
+        "''"
+    };
+    let sql = format!(
+        "SELECT t.name, t.type, t.serialization_format, {qos_col}, {hash_col}, \
+         (SELECT COUNT(*) FROM messages m WHERE m.topic_id = t.id) FROM topics t ORDER BY t.name"
+    );
+    let mut stmt = conn.prepare(&sql).map_err(sql_err(path))?;
+    let rows = stmt
+        .query_map([], |r| {
+            Ok((
+                TopicInfo {
+                    name: r.get(0)?,
+                    type_name: r.get(1)?,
+                    offered_qos_profiles: r.get(3)?,
+                    type_hash: r.get(4)?,
+                    message_count: r.get::<_, i64>(5)?.max(0) as u64,
+                },
+                r.get::<_, String>(2)?,
+            ))
+        })
+        .map_err(sql_err(path))?;
+    let mut out = Vec::new();
+    for row in rows {
+        let (t, fmt) = row.map_err(sql_err(path))?;
+        if fmt == "cdr" {
+            out.push(t);
+        }
+    }
+    Ok(out)
+}
+
+fn read_sqlite(
+    path: &Path,
+    wanted: &dyn Fn(&str) -> bool,
+    out: &mut Vec<BagMessage>,
+) -> Result<(), BagError> {
+    let conn = open_sqlite(path)?;
+    let mut stmt = conn
+        .prepare(
+            "SELECT t.name, t.type, m.timestamp, m.data FROM messages m \
+             JOIN topics t ON m.topic_id = t.id WHERE t.serialization_format = 'cdr' \
+             ORDER BY m.timestamp, m.id",
+        )
+        .map_err(sql_err(path))?;
+    let rows = stmt
+        .query_map([], |r| {
+            Ok((
+                r.get::<_, String>(0)?,
+                r.get::<_, String>(1)?,
+                r.get::<_, i64>(2)?,
+                r.get::<_, Vec<u8>>(3)?,
+            ))
+        })
+        .map_err(sql_err(path))?;
+    for row in rows {
+        let (topic, type_name, ts, data) = row.map_err(sql_err(path))?;
+        if !wanted(&topic) {
+            continue;
+        }
+        let t = ts.max(0) as u64;
+        out.push(BagMessage {
+            topic,
+            type_name,
+            log_time: t,
+            publish_time: t,
+            data,
+        });
+    }
+    Ok(())
+}

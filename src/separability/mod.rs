@@ -1,0 +1,38 @@
+//! Separability of adjacent regions of a point cloud (paper §III-A..C).
+//!
+//! * [`point`]: point separability η_p from actual and estimated non-data
+//!   counts (paper Eqs. 4, 7, 8);
+//! * [`grid`]: the spatial index that gathers the points of a search cuboid;
+//! * [`search`]: the oriented search primitive: the separability profile
+//!   over K boundary positions along a direction, and its argmax.
+
+pub mod grid;
+pub mod point;
+pub mod search;
+
+pub use grid::{GridError, OrientedBox, SpatialIndex};
+pub use point::{eta_from_counts, non_data_count, point_separability, PointSeparability};
+pub use search::{
+    Best, BoundaryStats, Cuboid, Delta, SearchError, SearchOutcome, SearchScratch, Searcher,
+};
+
+use serde::{Deserialize, Serialize};
+
+/// The `separability` configuration section.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SeparabilityConfig {
+    /// Number K of boundary positions tried in each search cuboid.
+    pub boundaries: usize,
+    /// Use the local δ_R of each cuboid (paper Eq. 6) instead of the cloud's global δ.
+    pub local_delta: bool,
+}
+
+impl Default for SeparabilityConfig {
+    fn default() -> Self {
+        Self {
+            boundaries: 30,
+            local_delta: false,
+        }
+    }
+}

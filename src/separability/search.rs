@@ -1,0 +1,710 @@
+//! The oriented search primitive: separability profile along a direction.
+//!
+//! Given a centre `c`, a unit direction `n` and a cuboid (cross-section
+//! `M_w × M_h` across `n`, depth `M_d` along it), the cuboid is split by `K`
+//! boundary planes ⟂ `n` into `r1` (the side of `−n`, "inner") and `r2` (the
+//! side of `+n`, "outer"). For every boundary the point separability η_p of
+//! paper Eq. 7 is evaluated (optionally weighted with attribute
+//! separabilities, paper Eqs. 1 and 9), and the argmax is reported. This is
+//! step 3 of the membrane (paper §III-D), and, with `K = 1`, one evaluation of
+//! the 3D separability filter (§IV-A).
+//!
+//! Implementation (one call, `O(gathered + K)`):
+//! 1. gather the actual points of the cuboid once from a [`SpatialIndex`];
+//! 2. bin their signed offsets `t = (p − c)·n` into `K + 1` equal slabs of
+//!    width `Δ = M_d/(K + 1)`; boundary `k` lies at `t_k = −M_d/2 + (k+1)Δ`,
+//!    so `r1 = [−M_d/2, t_k)` holds slabs `0..=k`;
+//! 3. prefix sums of the slab counts give `o1`, `o2` for every boundary in
+//!    O(1); `b1`, `b2` follow from Eq. 4 with `Vol(r1) = M_w M_h (k+1) Δ`.
+//!
+//! δ is either a fixed global value or the local δ_R of the merged region
+//! `R = r1 ∪ r2` (the whole cuboid, so one value per call): the mean of the
+//! per-point `d_i` of the gathered points (paper Eq. 6).
+//!
+//! All buffers live in a caller-owned [`SearchScratch`] (one per rayon
+//! thread); in steady state a call allocates nothing. The kernel applies no
+//! membrane policy: it exposes the full profile (offsets, `o1, o2, b1, b2,
+//! μ1, μ2`, η per boundary) and the gathered points' offsets and indices, so
+//! the caller can apply rules such as "inner side denser" or robust centring.
+
+use crate::cloud::Vec3;
+use crate::density::local_mean;
+use crate::separability::grid::{OrientedBox, SpatialIndex};
+use crate::separability::point::{eta_from_counts, non_data_count};
+use thiserror::Error;
+
+/// Errors of the oriented search.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum SearchError {
+    /// The cuboid's centre or direction is not finite, or the direction is zero.
+    #[error("search cuboid: centre {center:?} / direction {direction:?} must be finite and the direction non-zero")]
+    BadFrame {
+        /// The centre given.
+        center: [f64; 3],
+        /// The direction given.
+        direction: [f64; 3],
+    },
+    /// A cuboid extent is not a positive finite length.
+    #[error("search cuboid: {what} = {value} is not a positive finite length")]
+    BadExtent {
+        /// Which extent (`width`, `height`, `depth`).
+        what: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// `K = 0` boundary positions.
+    #[error("search: the number of boundary positions K must be at least 1")]
+    NoBoundaries,
+    /// The global δ is not a positive finite length.
+    #[error("search: global delta {0} is not a positive finite length")]
+    BadDelta(f64),
+    /// The per-point density does not cover the indexed cloud.
+    #[error(
+        "search: local delta has {got} per-point values for a cloud indexed with {need} points"
+    )]
+    DensityLength {
+        /// Values given.
+        got: usize,
+        /// Points in the index (at least).
+        need: usize,
+    },
+}
+
+/// The search cuboid: centre, direction and extents.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cuboid {
+    /// Centre `c` (the boundary offsets are measured from here).
+    pub center: Vec3,
+    /// Search direction `n` (normalised by the search; points from r1 to r2).
+    pub direction: Vec3,
+    /// Optional first cross-section axis (projected ⟂ `n`); an arbitrary
+    /// stable axis is chosen when `None` or parallel to `n`.
+    pub tangent: Option<Vec3>,
+    /// `M_w`: extent along the first cross-section axis.
+    pub width: f64,
+    /// `M_h`: extent along the second cross-section axis `n × tangent`.
+    pub height: f64,
+    /// `M_d`: extent along `n`.
+    pub depth: f64,
+}
+
+impl Cuboid {
+    /// A cuboid with an automatically chosen cross-section frame.
+    pub fn new(center: Vec3, direction: Vec3, width: f64, height: f64, depth: f64) -> Self {
+        Self {
+            center,
+            direction,
+            tangent: None,
+            width,
+            height,
+            depth,
+        }
+    }
+
+    /// The same cuboid with its width measured along `tangent` (projected ⟂ `n`).
+    pub fn with_tangent(mut self, tangent: Vec3) -> Self {
+        self.tangent = Some(tangent);
+        self
+    }
+
+    /// Volume `M_w M_h M_d`.
+    pub fn volume(&self) -> f64 {
+        self.width * self.height * self.depth
+    }
+
+    /// Validate and build the orthonormal frame `(n, a1, a2)`.
+    ///
+    /// # Errors
+    /// [`SearchError::BadFrame`] or [`SearchError::BadExtent`].
+    pub fn oriented_box(&self) -> Result<OrientedBox, SearchError> {
+        let bad_frame = || SearchError::BadFrame {
+            center: [self.center.x, self.center.y, self.center.z],
+            direction: [self.direction.x, self.direction.y, self.direction.z],
+        };
+        let finite = |v: &Vec3| v.iter().all(|c| c.is_finite());
+        if !finite(&self.center) || !finite(&self.direction) {
+            return Err(bad_frame());
+        }
+        let len = self.direction.norm();
+        if !(len.is_finite() && len > 0.0) {
+            return Err(bad_frame());
+        }
+        for (what, value) in [
+            ("width", self.width),
+            ("height", self.height),
+            ("depth", self.depth),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(SearchError::BadExtent { what, value });
+            }
+        }
+        let n = self.direction / len;
+        let project = |t: Vec3| {
+            let p = t - n * n.dot(&t);
+            let l = p.norm();
+            (l > 1e-9 && l.is_finite()).then(|| p / l)
+        };
+        let a1 = self
+            .tangent
+            .filter(finite)
+            .and_then(project)
+            .or_else(|| {
+                let helper = if n.x.abs() < 0.6 {
+                    Vec3::x()
+                } else {
+                    Vec3::y()
+                };
+                project(helper)
+            })
+            .ok_or_else(bad_frame)?;
+        let a2 = n.cross(&a1);
+        Ok(OrientedBox {
+            center: self.center,
+            axes: [n, a1, a2],
+            half: [0.5 * self.depth, 0.5 * self.width, 0.5 * self.height],
+        })
+    }
+}
+
+/// Where δ comes from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Delta<'a> {
+    /// One δ for every cuboid (the cloud's global estimate).
+    Global(f64),
+    /// Local δ_R: the mean of these per-point `d_i` (indexed like the cloud)
+    /// over the points gathered in the cuboid (paper Eq. 6).
+    Local(&'a [f64]),
+}
+
+/// Statistics of one boundary position.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct BoundaryStats {
+    /// Signed offset `t_k` of the boundary plane from the centre, along `n`.
+    pub offset: f64,
+    /// Actual points in r1 (`t < t_k`).
+    pub o1: u32,
+    /// Actual points in r2 (`t ≥ t_k`).
+    pub o2: u32,
+    /// Estimated non-data points in r1 (Eq. 4).
+    pub b1: f64,
+    /// Estimated non-data points in r2 (Eq. 4).
+    pub b2: f64,
+    /// Occupancy mean `o1/n1` of r1.
+    pub mu1: f64,
+    /// Occupancy mean `o2/n2` of r2.
+    pub mu2: f64,
+    /// Point separability η_p (Eq. 7).
+    pub eta_point: f64,
+    /// The separability used for the argmax: η_p, or the weighted η_w
+    /// (Eq. 9) when attributes are enabled.
+    pub eta: f64,
+}
+
+/// The argmax of a profile.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Best {
+    /// Boundary index `k` in `0..K`.
+    pub boundary: usize,
+    /// Its offset `t_k`.
+    pub offset: f64,
+    /// Its separability (`eta` of the boundary).
+    pub eta: f64,
+}
+
+/// Summary of one search call; the details stay in the [`SearchScratch`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SearchOutcome {
+    /// Number of actual points gathered in the cuboid.
+    pub gathered: usize,
+    /// δ used (global, or local δ_R; 0 when local and nothing was gathered).
+    pub delta: f64,
+    /// Boundary with the largest positive separability (first one on ties);
+    /// `None` when every boundary has η = 0.
+    pub best: Option<Best>,
+}
+
+/// Reusable buffers of the search; keep one per thread.
+#[derive(Debug, Clone, Default)]
+pub struct SearchScratch {
+    offsets: Vec<f64>,
+    indices: Vec<u32>,
+    slab_counts: Vec<u32>,
+    profile: Vec<BoundaryStats>,
+    band: Vec<f64>,
+    slab_width: f64,
+}
+
+impl SearchScratch {
+    /// Empty scratch; buffers grow on first use and are then reused.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Profile of the last search, one entry per boundary, innermost first.
+    pub fn profile(&self) -> &[BoundaryStats] {
+        &self.profile
+    }
+
+    /// Signed offsets `t = (p − c)·n` of the points gathered by the last search.
+    pub fn offsets(&self) -> &[f64] {
+        &self.offsets
+    }
+
+    /// Cloud indices of the gathered points (parallel to [`Self::offsets`]).
+    pub fn indices(&self) -> &[u32] {
+        &self.indices
+    }
+
+    /// Point count of each of the `K + 1` slabs, innermost first.
+    pub fn slab_counts(&self) -> &[u32] {
+        &self.slab_counts
+    }
+
+    /// Slab width `Δ = M_d / (K + 1)` of the last search.
+    pub fn slab_width(&self) -> f64 {
+        self.slab_width
+    }
+
+    /// Number of gathered points with offset in `[lo, hi]`.
+    pub fn count_in_band(&self, lo: f64, hi: f64) -> usize {
+        self.offsets.iter().filter(|&&t| t >= lo && t <= hi).count()
+    }
+
+    /// Median of the gathered offsets in `[lo, hi]` (mean of the middle pair
+    /// for an even count); `None` when the band is empty. For robust
+    /// centring on a layer of points. Allocation-free in steady state.
+    pub fn median_offset_in_band(&mut self, lo: f64, hi: f64) -> Option<f64> {
+        self.band.clear();
+        self.band
+            .extend(self.offsets.iter().copied().filter(|&t| t >= lo && t <= hi));
+        let n = self.band.len();
+        if n == 0 {
+            return None;
+        }
+        let mid = n / 2;
+        let (below, upper, _) = self.band.select_nth_unstable_by(mid, f64::total_cmp);
+        let upper = *upper;
+        if n % 2 == 1 {
+            Some(upper)
+        } else {
+            let lower = below.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            Some(0.5 * (lower + upper))
+        }
+    }
+}
+
+/// The oriented search over one indexed cloud. Cheap to build; shareable
+/// across threads (each thread brings its own [`SearchScratch`]).
+#[derive(Debug, Clone)]
+pub struct Searcher<'a> {
+    index: &'a SpatialIndex,
+    delta: Delta<'a>,
+    boundaries: usize,
+}
+
+impl<'a> Searcher<'a> {
+    /// A search over `index` with `boundaries` (K) positions and the given δ.
+    ///
+    /// # Errors
+    /// [`SearchError::NoBoundaries`], [`SearchError::BadDelta`] for a global δ
+    /// that is not positive and finite, [`SearchError::DensityLength`] when
+    /// the per-point values are fewer than the indexed points.
+    pub fn new(
+        index: &'a SpatialIndex,
+        delta: Delta<'a>,
+        boundaries: usize,
+    ) -> Result<Self, SearchError> {
+        if boundaries == 0 {
+            return Err(SearchError::NoBoundaries);
+        }
+        match delta {
+            Delta::Global(d) if !(d.is_finite() && d > 0.0) => {
+                return Err(SearchError::BadDelta(d));
+            }
+            Delta::Local(per_point) if per_point.len() < index.len() => {
+                return Err(SearchError::DensityLength {
+                    got: per_point.len(),
+                    need: index.len(),
+                });
+            }
+            _ => {}
+        }
+        Ok(Self {
+            index,
+            delta,
+            boundaries,
+        })
+    }
+
+    /// Number of boundary positions K.
+    pub fn boundaries(&self) -> usize {
+        self.boundaries
+    }
+
+    /// The spatial index searched.
+    pub fn index(&self) -> &'a SpatialIndex {
+        self.index
+    }
+
+    /// Evaluate the separability profile of `cuboid`; details go to `scratch`.
+    ///
+    /// # Errors
+    /// [`SearchError::BadFrame`] / [`SearchError::BadExtent`] for an invalid cuboid.
+    pub fn search(
+        &self,
+        cuboid: &Cuboid,
+        scratch: &mut SearchScratch,
+    ) -> Result<SearchOutcome, SearchError> {
+        let obb = cuboid.oriented_box()?;
+        let k_count = self.boundaries;
+        let slabs = k_count + 1;
+        let half_depth = obb.half[0];
+        let slab_width = cuboid.depth / slabs as f64;
+        let inv_slab = 1.0 / slab_width;
+
+        scratch.offsets.clear();
+        scratch.indices.clear();
+        scratch.slab_counts.clear();
+        scratch.slab_counts.resize(slabs, 0);
+        scratch.slab_width = slab_width;
+        {
+            let (offsets, indices, counts) = (
+                &mut scratch.offsets,
+                &mut scratch.indices,
+                &mut scratch.slab_counts,
+            );
+            self.index.for_each_in_box(&obb, |i, s| {
+                let t = s[0];
+                let slab = (((t + half_depth) * inv_slab) as usize).min(slabs - 1);
+                counts[slab] += 1;
+                offsets.push(t);
+                indices.push(i);
+            });
+        }
+        let gathered = scratch.offsets.len();
+        let delta = match self.delta {
+            Delta::Global(d) => d,
+            Delta::Local(per_point) => {
+                local_mean(per_point, scratch.indices.iter().map(|&i| i as usize)).unwrap_or(0.0)
+            }
+        };
+
+        let area = cuboid.width * cuboid.height;
+        scratch.profile.clear();
+        let mut best: Option<Best> = None;
+        let mut o1 = 0u32;
+        let total = gathered as u32;
+        for k in 0..k_count {
+            o1 += scratch.slab_counts[k];
+            let o2 = total - o1;
+            let vol1 = area * slab_width * (k + 1) as f64;
+            let vol2 = area * slab_width * (k_count - k) as f64;
+            let (fo1, fo2) = (f64::from(o1), f64::from(o2));
+            let b1 = non_data_count(vol1, delta, fo1);
+            let b2 = non_data_count(vol2, delta, fo2);
+            let (n1, n2) = (fo1 + b1, fo2 + b2);
+            let eta_point = eta_from_counts(fo1, b1, fo2, b2);
+            let offset = -half_depth + slab_width * (k + 1) as f64;
+            let stats = BoundaryStats {
+                offset,
+                o1,
+                o2,
+                b1,
+                b2,
+                mu1: if n1 > 0.0 { fo1 / n1 } else { 0.0 },
+                mu2: if n2 > 0.0 { fo2 / n2 } else { 0.0 },
+                eta_point,
+                eta: eta_point,
+            };
+            if stats.eta > 0.0 && best.is_none_or(|b| stats.eta > b.eta) {
+                best = Some(Best {
+                    boundary: k,
+                    offset,
+                    eta: stats.eta,
+                });
+            }
+            scratch.profile.push(stats);
+        }
+        Ok(SearchOutcome {
+            gathered,
+            delta,
+            best,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::separability::point::point_separability;
+    use proptest::prelude::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// A square sheet of points on the plane z = z0, spacing `s`, over [-1, 1]².
+    fn sheet(z0: f64, s: f64) -> Vec<Vec3> {
+        let n = (2.0 / s) as i32;
+        let mut v = Vec::new();
+        for i in 0..=n {
+            for j in 0..=n {
+                v.push(Vec3::new(-1.0 + i as f64 * s, -1.0 + j as f64 * s, z0));
+            }
+        }
+        v
+    }
+
+    #[test]
+    fn plane_is_found_at_its_offset() {
+        // Sheet at z = 0.13, searched from the origin along +z.
+        let pts = sheet(0.13, 0.02);
+        let idx = SpatialIndex::new(&pts).unwrap();
+        let s = Searcher::new(&idx, Delta::Global(0.02), 39).unwrap();
+        let mut scratch = SearchScratch::new();
+        let cub = Cuboid::new(Vec3::zeros(), Vec3::z(), 0.09, 0.09, 0.8);
+        let out = s.search(&cub, &mut scratch).unwrap();
+        // 5 × 5 grid points of spacing 0.02 (x, y in −0.04..=0.04) in the cross-section.
+        assert_eq!(out.gathered, 25);
+        let best = out.best.unwrap();
+        // Slab width 0.02; the sheet at 0.13 lies in slab (0.13+0.4)/0.02 = 26.5 → 26;
+        // the best boundary is right after it (r1 = slabs 0..=26 holds every
+        // point while r2 is empty) or right before it (symmetric).
+        let before = -0.4 + 0.02 * 26.0;
+        let after = -0.4 + 0.02 * 27.0;
+        assert!(
+            (best.offset - after).abs() < 1e-9 || (best.offset - before).abs() < 1e-9,
+            "{best:?}"
+        );
+        assert_eq!(scratch.profile().len(), 39);
+        assert_eq!(scratch.slab_counts()[26], 25);
+        assert!(scratch.offsets().iter().all(|t| (t - 0.13).abs() < 1e-12));
+        assert_eq!(scratch.median_offset_in_band(0.0, 0.2), Some(0.13));
+        assert_eq!(scratch.median_offset_in_band(0.2, 0.3), None);
+        assert_eq!(scratch.count_in_band(0.1, 0.2), 25);
+    }
+
+    #[test]
+    fn profile_matches_brute_force_counts() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let pts: Vec<Vec3> = (0..4000)
+            .map(|_| {
+                Vec3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0) * rng.random_range(0.0f64..1.0).powi(3),
+                )
+            })
+            .collect();
+        let per_point: Vec<f64> = (0..pts.len())
+            .map(|i| 0.01 + (i % 7) as f64 * 0.01)
+            .collect();
+        let idx = SpatialIndex::new(&pts).unwrap();
+        let mut scratch = SearchScratch::new();
+        for q in 0..50 {
+            let local = q % 2 == 0;
+            let delta = if local {
+                Delta::Local(&per_point)
+            } else {
+                Delta::Global(0.05)
+            };
+            let k = 1 + q % 17;
+            let s = Searcher::new(&idx, delta, k).unwrap();
+            let dir = Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            );
+            let cub = Cuboid::new(
+                Vec3::new(
+                    rng.random_range(-0.5..0.5),
+                    rng.random_range(-0.5..0.5),
+                    0.0,
+                ),
+                dir,
+                rng.random_range(0.05..0.4),
+                rng.random_range(0.05..0.4),
+                rng.random_range(0.1..1.0),
+            )
+            .with_tangent(Vec3::new(0.3, -0.2, 0.9));
+            let out = s.search(&cub, &mut scratch).unwrap();
+            // Brute force: explicit frame, every point.
+            let b = cub.oriented_box().unwrap();
+            let inside: Vec<(usize, f64)> = pts
+                .iter()
+                .enumerate()
+                .filter_map(|(i, p)| {
+                    let d = p - cub.center;
+                    let s: Vec<f64> = b.axes.iter().map(|a| d.dot(a)).collect();
+                    (0..3).all(|j| s[j].abs() <= b.half[j]).then_some((i, s[0]))
+                })
+                .collect();
+            assert_eq!(out.gathered, inside.len());
+            let delta_ref = if local {
+                inside.iter().map(|&(i, _)| per_point[i]).sum::<f64>() / inside.len().max(1) as f64
+            } else {
+                0.05
+            };
+            if !inside.is_empty() {
+                assert!((out.delta - delta_ref).abs() < 1e-12);
+            }
+            let dw = cub.depth / (k + 1) as f64;
+            let mut best = (0.0, None);
+            for (kk, st) in scratch.profile().iter().enumerate() {
+                let tk = -cub.depth / 2.0 + dw * (kk + 1) as f64;
+                assert!((st.offset - tk).abs() < 1e-12);
+                // Exclude points within rounding distance of the plane.
+                let o1 = inside.iter().filter(|&&(_, t)| t < tk).count() as u32;
+                let near = inside
+                    .iter()
+                    .filter(|&&(_, t)| (t - tk).abs() < 1e-9)
+                    .count() as u32;
+                assert!(st.o1 >= o1 && st.o1 <= o1 + near, "o1 {} vs {o1}", st.o1);
+                assert_eq!(st.o1 + st.o2, inside.len() as u32);
+                let area = cub.width * cub.height;
+                let r = point_separability(
+                    f64::from(st.o1),
+                    f64::from(st.o2),
+                    area * dw * (kk + 1) as f64,
+                    area * dw * (k - kk) as f64,
+                    out.delta,
+                );
+                assert_eq!((st.b1, st.b2, st.mu1, st.mu2), (r.b1, r.b2, r.mu1, r.mu2));
+                assert_eq!(st.eta_point, r.eta);
+                assert_eq!(st.eta, r.eta);
+                if r.eta > best.0 {
+                    best = (r.eta, Some(kk));
+                }
+            }
+            assert_eq!(out.best.map(|b| b.boundary), best.1);
+            let mut idx_sorted = scratch.indices().to_vec();
+            idx_sorted.sort_unstable();
+            let want: Vec<u32> = inside.iter().map(|&(i, _)| i as u32).collect();
+            assert_eq!(idx_sorted, want);
+        }
+    }
+
+    #[test]
+    fn empty_cuboid_and_bad_input() {
+        let pts = sheet(0.0, 0.1);
+        let idx = SpatialIndex::new(&pts).unwrap();
+        let per_point = vec![0.1; pts.len()];
+        let s = Searcher::new(&idx, Delta::Local(&per_point), 10).unwrap();
+        let mut scratch = SearchScratch::new();
+        let out = s
+            .search(
+                &Cuboid::new(Vec3::new(0.0, 0.0, 5.0), Vec3::z(), 0.1, 0.1, 0.5),
+                &mut scratch,
+            )
+            .unwrap();
+        assert_eq!((out.gathered, out.delta, out.best), (0, 0.0, None));
+        assert!(scratch.profile().iter().all(|b| b.eta == 0.0));
+        assert!(matches!(
+            s.search(
+                &Cuboid::new(Vec3::zeros(), Vec3::zeros(), 0.1, 0.1, 0.5),
+                &mut scratch
+            ),
+            Err(SearchError::BadFrame { .. })
+        ));
+        assert!(matches!(
+            s.search(
+                &Cuboid::new(Vec3::repeat(f64::NAN), Vec3::z(), 0.1, 0.1, 0.5),
+                &mut scratch
+            ),
+            Err(SearchError::BadFrame { .. })
+        ));
+        assert!(matches!(
+            s.search(
+                &Cuboid::new(Vec3::zeros(), Vec3::z(), 0.1, -1.0, 0.5),
+                &mut scratch
+            ),
+            Err(SearchError::BadExtent { what: "height", .. })
+        ));
+        assert_eq!(
+            Searcher::new(&idx, Delta::Global(0.1), 0).unwrap_err(),
+            SearchError::NoBoundaries
+        );
+        assert!(matches!(
+            Searcher::new(&idx, Delta::Global(f64::NAN), 3),
+            Err(SearchError::BadDelta(_))
+        ));
+        assert!(matches!(
+            Searcher::new(&idx, Delta::Local(&per_point[1..]), 3),
+            Err(SearchError::DensityLength { .. })
+        ));
+    }
+
+    #[test]
+    fn denser_side_and_direction_flip() {
+        // Dense sheet at z = 0 with a sparse sheet at z = 0.2: searching along
+        // +z and −z finds the same physical plane, with mirrored offsets.
+        let mut pts = sheet(0.0, 0.02);
+        pts.extend(sheet(0.2, 0.1));
+        let idx = SpatialIndex::new(&pts).unwrap();
+        let s = Searcher::new(&idx, Delta::Global(0.02), 29).unwrap();
+        let mut scratch = SearchScratch::new();
+        let c = Vec3::new(0.0, 0.0, 0.05);
+        let up = s
+            .search(&Cuboid::new(c, Vec3::z(), 0.2, 0.2, 0.6), &mut scratch)
+            .unwrap()
+            .best
+            .unwrap();
+        let down = s
+            .search(&Cuboid::new(c, -Vec3::z(), 0.2, 0.2, 0.6), &mut scratch)
+            .unwrap()
+            .best
+            .unwrap();
+        let dw = 0.6 / 30.0;
+        // The dense layer at z = 0 is at offset −0.05 (up) and +0.05 (down).
+        assert!((up.offset - -0.05).abs() <= dw + 1e-9, "{up:?}");
+        assert!((down.offset - 0.05).abs() <= dw + 1e-9, "{down:?}");
+    }
+
+    /// Dyadic coordinates keep offsets bit-exact under translation by
+    /// integers and scaling by powers of two.
+    fn dyadic_cloud(seed: u64) -> Vec<Vec3> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        (0..600)
+            .map(|_| {
+                Vec3::new(
+                    f64::from(rng.random_range(-64i32..64)) / 64.0,
+                    f64::from(rng.random_range(-64i32..64)) / 64.0,
+                    f64::from(rng.random_range(-16i32..16)) / 256.0,
+                )
+            })
+            .collect()
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(48))]
+        #[test]
+        fn profile_invariant_under_translation_and_scale(
+            seed in 0u64..1000, axis in 0usize..3, k in 1usize..40,
+            shift in (-8i32..8, -8i32..8, -8i32..8), scale_exp in -3i32..4,
+            w in 1u32..32, d in 1u32..64, delta_i in 1u32..16,
+        ) {
+            let pts = dyadic_cloud(seed);
+            let s = 2f64.powi(scale_exp);
+            let shift = Vec3::new(f64::from(shift.0), f64::from(shift.1), f64::from(shift.2));
+            let moved: Vec<Vec3> = pts.iter().map(|p| (p + shift) * s).collect();
+            let dir = [Vec3::x(), Vec3::y(), Vec3::z()][axis];
+            let (w, d, delta) = (f64::from(w) / 32.0, f64::from(d) / 32.0, f64::from(delta_i) / 128.0);
+            // Centre off the lattice so no point sits on a boundary plane.
+            let c = Vec3::new(1.0 / 1024.0, 3.0 / 1024.0, 5.0 / 2048.0);
+            let run = |pts: &[Vec3], c: Vec3, w: f64, d: f64, delta: f64| {
+                let idx = SpatialIndex::new(pts).unwrap();
+                let searcher = Searcher::new(&idx, Delta::Global(delta), k).unwrap();
+                let mut scratch = SearchScratch::new();
+                let out = searcher.search(&Cuboid::new(c, dir, w, w, d), &mut scratch).unwrap();
+                (out, scratch.profile().to_vec())
+            };
+            let (a, pa) = run(&pts, c, w, d, delta);
+            let (b, pb) = run(&moved, (c + shift) * s, w * s, d * s, delta * s);
+            prop_assert_eq!(a.gathered, b.gathered);
+            prop_assert_eq!(a.best.map(|x| x.boundary), b.best.map(|x| x.boundary));
+            for (x, y) in pa.iter().zip(&pb) {
+                prop_assert!((0.0..=1.0).contains(&x.eta));
+                prop_assert_eq!((x.o1, x.o2), (y.o1, y.o2));
+                prop_assert!((x.eta - y.eta).abs() < 1e-12);
+            }
+        }
+    }
+}

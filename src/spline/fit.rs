@@ -1,0 +1,351 @@
+//! Least-squares fit of the control net to samples (paper §III-D, step 4).
+//!
+//! Unknowns are one point per pole plus the `M·(L−2)` ring control points.
+//! With `A` the sample-to-unknown basis matrix (fixed for a given grid size
+//! and sample layout) and `R` a roughness operator (second differences along
+//! u, along v and across each pole), the control net minimises
+//! `‖A X − P‖² + λ‖R X‖²`, `λ = w·tr(AᵀA)/n`. The normal matrix
+//! `AᵀA + λRᵀR` is banded (bandwidth ≈ 4M with row-major ordering and the
+//! poles first/last), so it is factored once per layout with a banded
+//! Cholesky and each iteration only back-substitutes three right-hand sides.
+
+use super::surface::{ClosedSurface, Layout};
+use super::SplineError;
+use crate::cloud::Vec3;
+
+/// A factored least-squares system for one `(M, L, u_n, v_n)` sample layout.
+#[derive(Debug, Clone)]
+pub struct FitSystem {
+    layout: Layout,
+    n: usize,
+    bw: usize,
+    /// Banded lower Cholesky factor: row i holds columns i−bw..=i.
+    chol: Vec<f64>,
+    /// Per sample: 16 (unknown, weight) pairs (poles may repeat).
+    rows: Vec<[(u32, f64); 16]>,
+    rhs: Vec<Vec3>,
+    x: Vec<Vec3>,
+    roughness: f64,
+}
+
+impl FitSystem {
+    /// Build and factor the system for `layout` with roughness weight `w`
+    /// (relative: `λ = w·tr(AᵀA)/n`).
+    ///
+    /// # Errors
+    /// [`SplineError::Singular`] if the normal matrix is not positive definite.
+    pub fn new(layout: Layout, roughness: f64) -> Result<Self, SplineError> {
+        let (m, l) = (layout.m, layout.l);
+        let n = 2 + m * (l - 2);
+        let unknown = |r: usize, c: usize| -> u32 {
+            if r == 0 {
+                0
+            } else if r == l - 1 {
+                (n - 1) as u32
+            } else {
+                (1 + (r - 1) * m + c % m) as u32
+            }
+        };
+        let bw = (4 * m).min(n - 1);
+        let width = bw + 1;
+        let mut band = vec![0.0f64; n * width];
+        let add = |band: &mut [f64], i: usize, j: usize, v: f64| {
+            let (i, j) = if i >= j { (i, j) } else { (j, i) };
+            // i - j <= bw by construction of the ordering.
+            if i - j <= bw {
+                band[i * width + (j + bw - i)] += v;
+            }
+        };
+        let un = layout.u_n();
+        let mut rows = Vec::with_capacity(layout.len());
+        for j in 0..layout.v_n() {
+            let bv = layout.bv[j];
+            for i in 0..un {
+                let bu = layout.bu[i];
+                let mut row = [(0u32, 0.0f64); 16];
+                for b in 0..4 {
+                    for a in 0..4 {
+                        row[b * 4 + a] = (unknown(bv.first + b, bu.first + a), bv.w[b] * bu.w[a]);
+                    }
+                }
+                for &(p, wp) in &row {
+                    for &(q, wq) in &row {
+                        if p >= q {
+                            add(&mut band, p as usize, q as usize, wp * wq);
+                        }
+                    }
+                }
+                rows.push(row);
+            }
+        }
+        let trace: f64 = (0..n).map(|i| band[i * width + bw]).sum();
+        let lambda = roughness * trace / n as f64;
+        // Roughness stencils: second differences along u, v and across poles.
+        let mut stencils: Vec<[(u32, f64); 3]> = Vec::new();
+        for r in 1..l - 1 {
+            for c in 0..m {
+                stencils.push([
+                    (unknown(r, c + m - 1), 1.0),
+                    (unknown(r, c), -2.0),
+                    (unknown(r, c + 1), 1.0),
+                ]);
+                stencils.push([
+                    (unknown(r - 1, c), 1.0),
+                    (unknown(r, c), -2.0),
+                    (unknown(r + 1, c), 1.0),
+                ]);
+            }
+        }
+        for (pole_row, ring_row) in [(0, 1), (l - 1, l - 2)] {
+            for c in 0..m.div_ceil(2) {
+                stencils.push([
+                    (unknown(ring_row, c), 1.0),
+                    (unknown(pole_row, c), -2.0),
+                    (unknown(ring_row, c + m / 2), 1.0),
+                ]);
+            }
+        }
+        if lambda > 0.0 {
+            for s in &stencils {
+                for &(p, wp) in s {
+                    for &(q, wq) in s {
+                        if p >= q {
+                            add(&mut band, p as usize, q as usize, lambda * wp * wq);
+                        }
+                    }
+                }
+            }
+        }
+        let ridge = 1e-10 * trace / n as f64;
+        for i in 0..n {
+            band[i * width + bw] += ridge;
+        }
+        factor_band(&mut band, n, bw)?;
+        Ok(Self {
+            layout,
+            n,
+            bw,
+            chol: band,
+            rows,
+            rhs: vec![Vec3::zeros(); n],
+            x: vec![Vec3::zeros(); n],
+            roughness,
+        })
+    }
+
+    /// The sample layout this system was built for.
+    pub fn layout(&self) -> &Layout {
+        &self.layout
+    }
+
+    /// The relative roughness weight it was built with.
+    pub fn roughness(&self) -> f64 {
+        self.roughness
+    }
+
+    /// Fit `surface`'s control net (which must be `M × L` of this layout) to
+    /// `targets` (one per layout sample, flat index `j·u_n + i`).
+    ///
+    /// # Errors
+    /// [`SplineError::SampleCount`] when `targets` has the wrong length,
+    /// [`SplineError::GridMismatch`] when the surface has another grid size.
+    pub fn fit(
+        &mut self,
+        surface: &mut ClosedSurface,
+        targets: &[Vec3],
+    ) -> Result<(), SplineError> {
+        if targets.len() != self.rows.len() {
+            return Err(SplineError::SampleCount {
+                expected: self.rows.len(),
+                got: targets.len(),
+            });
+        }
+        if surface.m() != self.layout.m || surface.l() != self.layout.l {
+            return Err(SplineError::GridMismatch {
+                surface: (surface.m(), surface.l()),
+                system: (self.layout.m, self.layout.l),
+            });
+        }
+        self.rhs.fill(Vec3::zeros());
+        for (row, t) in self.rows.iter().zip(targets) {
+            for &(p, w) in row {
+                self.rhs[p as usize] += t * w;
+            }
+        }
+        solve_band(&self.chol, self.n, self.bw, &self.rhs, &mut self.x);
+        if self.x.iter().any(|p| !p.iter().all(|c| c.is_finite())) {
+            return Err(SplineError::NonFinite);
+        }
+        surface.set_from_unknowns(&self.x);
+        Ok(())
+    }
+}
+
+/// In-place banded Cholesky `A = L Lᵀ`; row i stores columns i−bw..=i.
+fn factor_band(a: &mut [f64], n: usize, bw: usize) -> Result<(), SplineError> {
+    let width = bw + 1;
+    for i in 0..n {
+        let i0 = i.saturating_sub(bw);
+        for j in i0..=i {
+            let p0 = i0.max(j.saturating_sub(bw));
+            let mut s = a[i * width + (j + bw - i)];
+            let ri = i * width + bw - i;
+            let rj = j * width + bw - j;
+            for p in p0..j {
+                s -= a[ri + p] * a[rj + p];
+            }
+            if i == j {
+                if s.is_nan() || s <= 0.0 || !s.is_finite() {
+                    return Err(SplineError::Singular { row: i });
+                }
+                a[i * width + bw] = s.sqrt();
+            } else {
+                a[i * width + (j + bw - i)] = s / a[j * width + bw];
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Solve `L Lᵀ x = b` for three right-hand sides at once.
+fn solve_band(l: &[f64], n: usize, bw: usize, b: &[Vec3], x: &mut [Vec3]) {
+    let width = bw + 1;
+    for i in 0..n {
+        let mut s = b[i];
+        let ri = i * width + bw - i;
+        for (p, xp) in x.iter().enumerate().take(i).skip(i.saturating_sub(bw)) {
+            s -= xp * l[ri + p];
+        }
+        x[i] = s / l[i * width + bw];
+    }
+    for i in (0..n).rev() {
+        let mut s = x[i];
+        let end = (i + bw).min(n - 1);
+        for q in i + 1..=end {
+            s -= x[q] * l[q * width + (i + bw - q)];
+        }
+        x[i] = s / l[i * width + bw];
+    }
+}
+
+/// Refit `surface` onto a new `M' × L'` grid with the sample layout and
+/// roughness of `system` (whose layout is `M' × L'`), keeping the shape up to
+/// the fit error: the old surface is evaluated at the new layout's samples
+/// and fitted.
+///
+/// # Errors
+/// Propagates [`FitSystem::fit`] errors.
+pub fn regrid(
+    surface: &ClosedSurface,
+    system: &mut FitSystem,
+) -> Result<ClosedSurface, SplineError> {
+    let lay = system.layout().clone();
+    let mut targets = Vec::with_capacity(lay.len());
+    for &v in &lay.vs {
+        for &u in &lay.us {
+            targets.push(surface.eval(u, v).p);
+        }
+    }
+    let mut out = ClosedSurface::from_net(lay.m, lay.l, vec![Vec3::zeros(); lay.m * lay.l])?;
+    system.fit(&mut out, &targets)?;
+    out.fix_orientation();
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DMatrix;
+
+    fn sphere_targets(lay: &Layout, r: f64) -> Vec<Vec3> {
+        let mut t = Vec::new();
+        for &v in &lay.vs {
+            for &u in &lay.us {
+                let th = std::f64::consts::PI * v;
+                let ph = 2.0 * std::f64::consts::PI * u;
+                t.push(Vec3::new(
+                    r * th.sin() * ph.cos(),
+                    r * th.sin() * ph.sin(),
+                    -r * th.cos(),
+                ));
+            }
+        }
+        t
+    }
+
+    #[test]
+    fn band_cholesky_matches_dense() {
+        let n = 30;
+        let bw = 5;
+        let mut dense = DMatrix::<f64>::zeros(n, n);
+        for i in 0..n {
+            for j in 0..n {
+                if i.abs_diff(j) <= bw {
+                    dense[(i, j)] =
+                        1.0 / (1.0 + (i as f64 - j as f64).abs()) + if i == j { 5.0 } else { 0.0 };
+                }
+            }
+        }
+        let width = bw + 1;
+        let mut band = vec![0.0; n * width];
+        for i in 0..n {
+            for j in i.saturating_sub(bw)..=i {
+                band[i * width + (j + bw - i)] = dense[(i, j)];
+            }
+        }
+        factor_band(&mut band, n, bw).unwrap();
+        let b: Vec<Vec3> = (0..n)
+            .map(|i| Vec3::new(i as f64, 1.0, -(i as f64).sin()))
+            .collect();
+        let mut x = vec![Vec3::zeros(); n];
+        solve_band(&band, n, bw, &b, &mut x);
+        let chol = dense.clone().cholesky().unwrap();
+        for k in 0..3 {
+            let rhs = nalgebra::DVector::from_iterator(n, b.iter().map(|v| v[k]));
+            let xs = chol.solve(&rhs);
+            for i in 0..n {
+                assert!((xs[i] - x[i][k]).abs() < 1e-10);
+            }
+        }
+    }
+
+    #[test]
+    fn fit_reproduces_a_sphere() {
+        let lay = Layout::samples(16, 10, 40, 40).unwrap();
+        let targets = sphere_targets(&lay, 0.5);
+        let mut sys = FitSystem::new(lay.clone(), 1e-3).unwrap();
+        let mut s = ClosedSurface::from_net(16, 10, vec![Vec3::zeros(); 160]).unwrap();
+        sys.fit(&mut s, &targets).unwrap();
+        s.fix_orientation();
+        let mut worst: f64 = 0.0;
+        for j in 0..50 {
+            for i in 0..50 {
+                let p = s.eval(i as f64 / 50.0, j as f64 / 49.0).p;
+                worst = worst.max((p.norm() - 0.5).abs());
+            }
+        }
+        assert!(worst < 0.01, "max radial error {worst}");
+    }
+
+    #[test]
+    fn regrid_keeps_the_shape() {
+        let lay = Layout::samples(8, 5, 40, 40).unwrap();
+        let targets = sphere_targets(&lay, 1.0);
+        let mut sys = FitSystem::new(lay, 1e-3).unwrap();
+        let mut s = ClosedSurface::from_net(8, 5, vec![Vec3::zeros(); 40]).unwrap();
+        sys.fit(&mut s, &targets).unwrap();
+        s.fix_orientation();
+        let mut big = FitSystem::new(Layout::samples(24, 15, 48, 29).unwrap(), 1e-4).unwrap();
+        let g = regrid(&s, &mut big).unwrap();
+        assert_eq!((g.m(), g.l()), (24, 15));
+        let mut worst: f64 = 0.0;
+        for j in 1..30 {
+            for i in 0..30 {
+                let (u, v) = (i as f64 / 30.0, j as f64 / 30.0);
+                worst = worst.max((s.eval(u, v).p - g.eval(u, v).p).norm());
+            }
+        }
+        assert!(worst < 0.02, "regrid moved the surface by {worst}");
+        assert_eq!(g.orientation(), s.orientation());
+    }
+}
