@@ -80,8 +80,21 @@ fn valid_xyz(n: usize) -> PointCloud2 {
     encode_pointcloud2(&c, Header::default())
 }
 
+/// 2000 cases per property in the test suite; set `SEPMEM_FUZZ_CASES` for a
+/// longer fuzzing session.
+fn fuzz_config() -> ProptestConfig {
+    let cases = std::env::var("SEPMEM_FUZZ_CASES")
+        .ok()
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(2000);
+    ProptestConfig {
+        cases,
+        ..ProptestConfig::default()
+    }
+}
+
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 2000, ..ProptestConfig::default() })]
+    #![proptest_config(fuzz_config())]
 
     /// Random layouts: no panic, and whatever decodes respects the counts.
     #[test]

@@ -9,6 +9,8 @@
 //!   rosbag2's concatenated definitions for MCAP schemas, and a structural
 //!   CDR checker run before every decode.
 //! * [`pointcloud2`]: PointCloud2 ↔ [`crate::cloud::PointCloud`].
+//! * [`convert`]: [`crate::mesh::TriMesh`] ↔ `shape_msgs/Mesh`, TRIANGLE_LIST
+//!   markers and `SurfaceMesh` geometry.
 //!
 //! Encoding is XCDR1 little-endian with the 4-byte encapsulation header
 //! `00 01 00 00` (what rmw_zenoh, rosbag2 and the DDS bridges carry);
@@ -20,6 +22,7 @@
 //! that a non-ASCII frame id is byte-exact. Invalid UTF-8 in received strings
 //! is a typed [`WireError::Decode`].
 
+pub mod convert;
 pub mod msgdef;
 pub mod msgs;
 pub mod pointcloud2;
