@@ -17,7 +17,9 @@
 //! | [`transport`] | ROS 2 wire compatibility over zenoh: rmw_zenoh keys, attachments, liveliness tokens; sessions |
 //! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
 //! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
+//! | [`bench`] | `sepmem bench`: the paper's evaluation, reproduced (input conditions, runner, reports) |
 //! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
+//! | [`membrane`] | the separability membrane: initialisation, evolution, dynamic adjustment, mesh extraction |
 //! | [`spline`] | the closed cubic B-spline surface (Eq. 10), its least-squares fit and growth |
 //! | [`bag`] | rosbag2 bags: MCAP and sqlite3 reading, MCAP writing with ROS 2 schemas |
 //! | [`wire`] | ROS 2 messages, CDR codec, RIHS01 type hashes, PointCloud2 ↔ points |
@@ -26,10 +28,12 @@
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
 pub mod bag;
+pub mod bench;
 pub mod cloud;
 pub mod config;
 pub mod density;
 pub mod error;
+pub mod membrane;
 pub mod mesh;
 pub mod node;
 pub mod separability;

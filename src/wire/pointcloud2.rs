@@ -109,6 +109,9 @@ pub enum PointCloud2Error {
         /// Limit.
         max: usize,
     },
+    /// The CDR bytes are not a valid PointCloud2.
+    #[error(transparent)]
+    Cdr(#[from] super::WireError),
 }
 
 /// A decoded cloud and what was dropped from it.
@@ -361,6 +364,26 @@ pub fn decode_pointcloud2(
         points_in: n,
         dropped_non_finite: dropped,
     })
+}
+
+/// Decode a CDR-encoded PointCloud2 (as received from a topic or a bag)
+/// into points, rejecting payloads above `limits.max_bytes` (plus 64 KiB
+/// for the header and field list) before anything is decoded.
+///
+/// # Errors
+/// [`PointCloud2Error`], including [`PointCloud2Error::Cdr`] for malformed CDR.
+pub fn decode_pointcloud2_cdr(
+    bytes: &[u8],
+    limits: &WireConfig,
+) -> Result<DecodedCloud, PointCloud2Error> {
+    if bytes.len() > limits.max_bytes.saturating_add(1 << 16) {
+        return Err(PointCloud2Error::TooManyBytes {
+            bytes: bytes.len(),
+            max: limits.max_bytes,
+        });
+    }
+    let msg: PointCloud2 = super::decode(bytes)?;
+    decode_pointcloud2(&msg, limits)
 }
 
 /// Encode a cloud as an unorganised little-endian PointCloud2: FLOAT32
@@ -651,5 +674,22 @@ mod tests {
         assert!(parts[&3].attribute("label").is_none());
         assert!(parts[&3].attribute("r").is_some());
         assert!(split_by_label(&d.cloud, "nope").is_none());
+        // Through CDR, with the payload limit.
+        let bytes = super::super::encode(&m).unwrap();
+        let d2 = decode_pointcloud2_cdr(&bytes, &WireConfig::default()).unwrap();
+        assert_eq!(d2, d);
+        let tiny = WireConfig {
+            max_points: 10,
+            max_bytes: 0,
+        };
+        let big = vec![0u8; (1 << 16) + 1];
+        assert!(matches!(
+            decode_pointcloud2_cdr(&big, &tiny),
+            Err(PointCloud2Error::TooManyBytes { .. })
+        ));
+        assert!(matches!(
+            decode_pointcloud2_cdr(&bytes[..10], &tiny),
+            Err(PointCloud2Error::Cdr(_))
+        ));
     }
 }

@@ -1,0 +1,170 @@
+//! The `membrane` section of the configuration: every parameter of the
+//! separability membrane (paper §III-D/E/F) and the mechanisms this
+//! implementation adds. Documented key by key in `launch/sepmem.json5`.
+//!
+//! Lengths are relative to the object size (the longest bounding-box edge of
+//! the filtered cloud) unless their name ends in `_delta` (multiples of the
+//! point spacing δ) or `_m` (metres).
+
+use serde::{Deserialize, Serialize};
+
+/// Which axis the two poles of the membrane lie on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PoleAxis {
+    /// The x axis.
+    X,
+    /// The y axis.
+    Y,
+    /// The z axis.
+    Z,
+    /// The axis of the longest bounding-box edge.
+    Longest,
+    /// The axis of the shortest bounding-box edge.
+    Shortest,
+}
+
+/// One attribute of the weighted separability (paper Eq. 9).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AttributeWeight {
+    /// Attribute channel name (`intensity`, `luma`, `density`, or a field of the input).
+    pub name: String,
+    /// Its weight `w_j` in Eq. 9.
+    pub weight: f64,
+}
+
+/// Parameters of the separability membrane.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MembraneConfig {
+    /// k of the per-point mean k-NN distance d_i (paper Eq. 5).
+    pub knn_k: usize,
+    /// Drop points whose d_i exceeds this multiple of the median d_i before
+    /// anything else (0 disables the outlier filter).
+    pub outlier_factor: f64,
+    /// Use the local δ_R (paper Eq. 6) in the search instead of the global median δ.
+    pub local_delta: bool,
+    /// Axis of the two poles.
+    pub pole_axis: PoleAxis,
+    /// Quantile used for the robust extreme points of the initial octagon.
+    pub init_quantile: f64,
+    /// Enlargement of the initial surface beyond the smallest one enclosing every point.
+    pub init_margin: f64,
+    /// Initial control grid `[M, L]` (columns around, rows pole to pole).
+    pub grid_start: [usize; 2],
+    /// Largest control grid `[M, L]` reached by dynamic adjustment.
+    pub grid_max: [usize; 2],
+    /// Control columns and rows added per adjustment `[m, l]`.
+    pub grid_step: [usize; 2],
+    /// Dynamic membrane adjustment (§III-F); false keeps `grid_start` fixed.
+    pub adaptive: bool,
+    /// `div_min` of the sample count `div_n = max(div_min, α(q−1)+1)`.
+    pub div_min: usize,
+    /// `α` of the sample count formula.
+    pub alpha: f64,
+    /// Number of boundary positions K tried in each search cuboid.
+    pub boundaries: usize,
+    /// Shift factor β (< 1) applied to each sample's move.
+    pub beta: f64,
+    /// Initial search depth M_d (relative to the object size).
+    pub depth_start: f64,
+    /// Initial search depth for a warm start (relative).
+    pub depth_warm: f64,
+    /// Factor applied to the depth after every iteration.
+    pub depth_decay: f64,
+    /// Depth floor, in multiples of δ.
+    pub depth_floor_delta: f64,
+    /// Cross-section M_w, M_h as a multiple of the local sample spacing.
+    pub cross_scale: f64,
+    /// Cross-section floor, in multiples of δ.
+    pub cross_min_delta: f64,
+    /// Cross-section cap (relative to the object size).
+    pub cross_max: f64,
+    /// Robust shift band: points with offsets in `[t* − inner·δ, t* + outer·δ]` …
+    pub band_inner_delta: f64,
+    /// … are centred on by their median (`band_outer_delta` is `outer`).
+    pub band_outer_delta: f64,
+    /// Accept a boundary only where the inner region is the denser one (μ1 ≥ μ2).
+    pub inside_denser: bool,
+    /// Dense-side significance: the band must hold this fraction of the
+    /// expected surface count `M_w·M_h/δ²`.
+    pub significance: f64,
+    /// 3×3 median filter of the per-sample shifts.
+    pub median_filter: bool,
+    /// Gated inward force where the occupancy grid says the sample is outside.
+    pub inward_force: bool,
+    /// Voxel edge of the occupancy grid, in multiples of δ.
+    pub inward_voxel_delta: f64,
+    /// Points in a voxel's 3×3×3 neighbourhood for it to be occupied.
+    pub inward_min_points: usize,
+    /// Inward move, as a fraction of the current search depth.
+    pub inward_step: f64,
+    /// Roughness penalty weight w of the fit (`λ = w·tr(AᵀA)/n`).
+    pub roughness: f64,
+    /// Grow the control grid when the gain of η_g falls below this (g_min).
+    pub g_min: f64,
+    /// Minimum iterations on a grid before it may grow again.
+    pub grow_after: usize,
+    /// Plateau: |Δη_g| below this …
+    pub plateau_eps: f64,
+    /// … for this many consecutive iterations on the final grid stops.
+    pub plateau_patience: usize,
+    /// Hard cap on iterations.
+    pub max_iterations: usize,
+    /// Wall-clock budget per reconstruction in ms used by the CLI (0 = none).
+    pub time_limit_ms: f64,
+    /// Weight of the point separability η_p in the weighted mean (Eq. 9).
+    pub spatial_weight: f64,
+    /// Attribute separabilities and weights (empty = spatial only).
+    pub attributes: Vec<AttributeWeight>,
+    /// Worker threads for the per-sample search (0 = all cores, 1 = serial).
+    pub threads: usize,
+}
+
+impl Default for MembraneConfig {
+    fn default() -> Self {
+        Self {
+            knn_k: 8,
+            outlier_factor: 2.0,
+            local_delta: false,
+            pole_axis: PoleAxis::Z,
+            init_quantile: 0.002,
+            init_margin: 1.05,
+            grid_start: [8, 5],
+            grid_max: [40, 25],
+            grid_step: [8, 5],
+            adaptive: true,
+            div_min: 24,
+            alpha: 2.0,
+            boundaries: 30,
+            beta: 0.9,
+            depth_start: 0.3,
+            depth_warm: 0.08,
+            depth_decay: 0.85,
+            depth_floor_delta: 4.0,
+            cross_scale: 1.0,
+            cross_min_delta: 3.0,
+            cross_max: 0.1,
+            band_inner_delta: 2.0,
+            band_outer_delta: 1.0,
+            inside_denser: true,
+            significance: 0.3,
+            median_filter: true,
+            inward_force: true,
+            inward_voxel_delta: 2.0,
+            inward_min_points: 11,
+            inward_step: 0.5,
+            roughness: 1e-2,
+            g_min: 0.01,
+            grow_after: 2,
+            plateau_eps: 1e-3,
+            plateau_patience: 3,
+            max_iterations: 60,
+            time_limit_ms: 0.0,
+            spatial_weight: 1.0,
+            attributes: Vec::new(),
+            threads: 0,
+        }
+    }
+}

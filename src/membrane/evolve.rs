@@ -1,0 +1,549 @@
+//! The evolution loop of the separability membrane (paper §III-D steps 1–5,
+//! dynamic adjustment §III-F).
+//!
+//! Each iteration samples the surface on the grid of Eq. 14, runs the
+//! oriented separability search (Eq. 7 / Eq. 9) along every sample's outward
+//! normal, turns the profile into a shift (inner-side-denser rule, dense-side
+//! significance, median of the offsets in a band around `t*`, gated inward
+//! force), median-filters the shifts over the 3×3 sample neighbourhood, moves
+//! the samples by `β·shift` and refits the control net. `η_g` is the mean of
+//! the per-sample accepted maxima `η*`.
+
+use super::config::MembraneConfig;
+use super::extract::extract_mesh;
+use super::init::octagon;
+use super::occupancy::OutsideGrid;
+use super::{Budget, MembraneError, PhaseTimes, Reconstruction, Report, StopReason, WarmStart};
+use crate::cloud::{Aabb, CloudError, PointCloud, Vec3};
+use crate::density::Density;
+use crate::separability::grid::SpatialIndex;
+use crate::separability::search::{Cuboid, Delta, SearchScratch, Searcher};
+use crate::spline::{regrid, ClosedSurface, FitSystem, Layout};
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::time::Instant;
+
+/// Smallest number of points the membrane accepts.
+pub const MIN_POINTS: usize = 16;
+
+/// Check every parameter's range.
+///
+/// # Errors
+/// [`MembraneError::Config`] naming the first bad key.
+pub fn validate(cfg: &MembraneConfig) -> Result<(), MembraneError> {
+    let bad = |key: &'static str, problem: &str| {
+        Err(MembraneError::Config {
+            key,
+            problem: problem.to_string(),
+        })
+    };
+    let pos = |x: f64| x > 0.0 && x.is_finite();
+    if cfg.knn_k == 0 {
+        return bad("knn_k", "must be at least 1");
+    }
+    if cfg.outlier_factor.is_nan() || cfg.outlier_factor < 0.0 {
+        return bad("outlier_factor", "must be >= 0");
+    }
+    if cfg.grid_start[0] < 4 || cfg.grid_start[1] < 4 {
+        return bad("grid_start", "needs M >= 4 and L >= 4");
+    }
+    if cfg.grid_max[0] < cfg.grid_start[0] || cfg.grid_max[1] < cfg.grid_start[1] {
+        return bad("grid_max", "must be at least grid_start");
+    }
+    if cfg.adaptive && cfg.grid_step[0] == 0 && cfg.grid_step[1] == 0 {
+        return bad("grid_step", "must add at least one column or row");
+    }
+    if cfg.div_min < 4 {
+        return bad("div_min", "must be at least 4");
+    }
+    if !pos(cfg.alpha) {
+        return bad("alpha", "must be positive");
+    }
+    if cfg.boundaries == 0 {
+        return bad("boundaries", "must be at least 1");
+    }
+    if cfg.beta.is_nan() || cfg.beta <= 0.0 || cfg.beta > 1.0 {
+        return bad("beta", "must be in (0, 1]");
+    }
+    for (k, v) in [
+        ("depth_start", cfg.depth_start),
+        ("depth_warm", cfg.depth_warm),
+        ("depth_floor_delta", cfg.depth_floor_delta),
+        ("cross_scale", cfg.cross_scale),
+        ("cross_min_delta", cfg.cross_min_delta),
+        ("cross_max", cfg.cross_max),
+        ("inward_voxel_delta", cfg.inward_voxel_delta),
+    ] {
+        if !pos(v) {
+            return bad(k, "must be a positive length");
+        }
+    }
+    if !(cfg.depth_decay > 0.0 && cfg.depth_decay <= 1.0) {
+        return bad("depth_decay", "must be in (0, 1]");
+    }
+    for (k, v) in [
+        ("band_inner_delta", cfg.band_inner_delta),
+        ("band_outer_delta", cfg.band_outer_delta),
+        ("significance", cfg.significance),
+        ("inward_step", cfg.inward_step),
+        ("roughness", cfg.roughness),
+        ("g_min", cfg.g_min),
+        ("plateau_eps", cfg.plateau_eps),
+        ("time_limit_ms", cfg.time_limit_ms),
+        ("init_quantile", cfg.init_quantile),
+        ("spatial_weight", cfg.spatial_weight),
+    ] {
+        if !(v >= 0.0 && v.is_finite()) {
+            return bad(k, "must be a finite value >= 0");
+        }
+    }
+    if cfg.init_quantile >= 0.5 {
+        return bad("init_quantile", "must be below 0.5");
+    }
+    if !(cfg.init_margin >= 1.0 && cfg.init_margin.is_finite()) {
+        return bad("init_margin", "must be >= 1");
+    }
+    if cfg.max_iterations == 0 {
+        return bad("max_iterations", "must be at least 1");
+    }
+    Ok(())
+}
+
+/// Sample counts `(u_n, v_n)` for an `M × L` grid (paper Eq. 14).
+pub fn sample_counts(cfg: &MembraneConfig, m: usize, l: usize) -> (usize, usize) {
+    let div = |q: usize| -> usize {
+        let d = (cfg.alpha * (q as f64 - 1.0) + 1.0).round() as usize;
+        d.max(cfg.div_min)
+    };
+    // u is periodic: q columns span q intervals, i.e. the same as q+1 clamped points.
+    (div(m + 1), div(l))
+}
+
+/// Cache of factored fit systems, one per control grid.
+struct Fits {
+    roughness: f64,
+    map: HashMap<(usize, usize), FitSystem>,
+}
+
+impl Fits {
+    fn get(
+        &mut self,
+        cfg: &MembraneConfig,
+        m: usize,
+        l: usize,
+    ) -> Result<&mut FitSystem, MembraneError> {
+        if !self.map.contains_key(&(m, l)) {
+            let (un, vn) = sample_counts(cfg, m, l);
+            let sys = FitSystem::new(Layout::samples(m, l, un, vn)?, self.roughness)?;
+            self.map.insert((m, l), sys);
+        }
+        self.map.get_mut(&(m, l)).ok_or(MembraneError::Config {
+            key: "grid_start",
+            problem: "fit cache lost a grid".into(),
+        })
+    }
+}
+
+/// Per-sample search result.
+#[derive(Debug, Clone, Copy, Default)]
+struct SampleOut {
+    shift: f64,
+    eta: f64,
+    /// 0 = no move, 1 = boundary found, 2 = inward force.
+    state: u8,
+}
+
+/// Everything the per-sample search needs.
+struct Stepper<'a> {
+    cfg: &'a MembraneConfig,
+    searcher: Searcher<'a>,
+    delta: f64,
+    outside: Option<&'a OutsideGrid>,
+    cross_max: f64,
+}
+
+impl Stepper<'_> {
+    #[allow(clippy::too_many_arguments)]
+    fn sample(
+        &self,
+        surface: &ClosedSurface,
+        layout: &Layout,
+        i: usize,
+        j: usize,
+        depth: f64,
+        allow_inward: bool,
+        scratch: &mut SearchScratch,
+    ) -> SampleOut {
+        let cfg = self.cfg;
+        let sp = surface.eval_at(layout, i, j);
+        let n = surface.normal(&sp);
+        let cmin = cfg.cross_min_delta * self.delta;
+        let cmax = self.cross_max.max(cmin);
+        let w = (sp.su.norm() / layout.u_n() as f64 * cfg.cross_scale).clamp(cmin, cmax);
+        let h = (sp.sv.norm() / layout.v_n() as f64 * cfg.cross_scale).clamp(cmin, cmax);
+        let mut cub = Cuboid::new(sp.p, n, w, h, depth);
+        if sp.su.norm_squared() > 0.0 {
+            cub = cub.with_tangent(sp.su);
+        }
+        let out = match self.searcher.search(&cub, scratch) {
+            Ok(o) => o,
+            Err(_) => return SampleOut::default(),
+        };
+        let d = if out.delta > 0.0 {
+            out.delta
+        } else {
+            self.delta
+        };
+        let expected = w * h / (d * d);
+        let mut best: Option<(f64, f64)> = None;
+        for st in scratch.profile() {
+            if st.eta <= best.map_or(0.0, |b| b.1) {
+                continue;
+            }
+            if cfg.inside_denser && st.mu1 < st.mu2 {
+                continue;
+            }
+            best = Some((st.offset, st.eta));
+        }
+        if let Some((t, eta)) = best {
+            let lo = t - cfg.band_inner_delta * d;
+            let hi = t + cfg.band_outer_delta * d;
+            let count = scratch.count_in_band(lo, hi);
+            if count > 0 && count as f64 >= cfg.significance * expected {
+                let m = scratch.median_offset_in_band(lo, hi).unwrap_or(t);
+                return SampleOut {
+                    shift: m,
+                    eta,
+                    state: 1,
+                };
+            }
+        }
+        if allow_inward && self.outside.is_some_and(|g| g.is_outside(&sp.p)) {
+            return SampleOut {
+                shift: -cfg.inward_step * depth,
+                eta: 0.0,
+                state: 2,
+            };
+        }
+        SampleOut::default()
+    }
+
+    /// Search every sample of `layout` (in parallel, coarse row chunks).
+    fn search_all(
+        &self,
+        surface: &ClosedSurface,
+        layout: &Layout,
+        depth: f64,
+        allow_inward: bool,
+        outs: &mut Vec<SampleOut>,
+        scratches: &mut [SearchScratch],
+    ) {
+        let un = layout.u_n();
+        let vn = layout.v_n();
+        outs.resize(un * vn, SampleOut::default());
+        let chunks = scratches.len().max(1);
+        let rows_per = vn.div_ceil(chunks).max(1);
+        outs.par_chunks_mut(rows_per * un)
+            .zip(scratches.par_iter_mut())
+            .enumerate()
+            .for_each(|(c, (chunk, scratch))| {
+                for (k, o) in chunk.iter_mut().enumerate() {
+                    let j = c * rows_per + k / un;
+                    let i = k % un;
+                    *o = self.sample(surface, layout, i, j, depth, allow_inward, scratch);
+                }
+            });
+    }
+}
+
+/// Median of the shifts of moving samples in each 3×3 neighbourhood
+/// (periodic in u, clamped in v); samples that do not move stay put.
+fn median_filter(outs: &[SampleOut], un: usize, vn: usize, shifts: &mut Vec<f64>) {
+    shifts.resize(outs.len(), 0.0);
+    let mut buf = [0.0f64; 9];
+    for j in 0..vn {
+        for i in 0..un {
+            let k = j * un + i;
+            if outs[k].state == 0 {
+                shifts[k] = 0.0;
+                continue;
+            }
+            let mut n = 0;
+            for dj in [-1i64, 0, 1] {
+                let jj = j as i64 + dj;
+                if jj < 0 || jj >= vn as i64 {
+                    continue;
+                }
+                for di in [un - 1, 0, 1] {
+                    let ii = (i + di) % un;
+                    let o = outs[jj as usize * un + ii];
+                    if o.state != 0 {
+                        buf[n] = o.shift;
+                        n += 1;
+                    }
+                }
+            }
+            let s = &mut buf[..n];
+            s.sort_unstable_by(f64::total_cmp);
+            shifts[k] = if n % 2 == 1 {
+                s[n / 2]
+            } else {
+                0.5 * (s[n / 2 - 1] + s[n / 2])
+            };
+        }
+    }
+}
+
+fn ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1e3
+}
+
+/// Run one reconstruction (in the current rayon pool).
+pub(crate) fn run(
+    cloud: &PointCloud,
+    cfg: &MembraneConfig,
+    budget: &Budget,
+    warm: Option<&WarmStart>,
+) -> Result<Reconstruction, MembraneError> {
+    let t_start = Instant::now();
+    let mut times = PhaseTimes::default();
+
+    // ---- prepare: finite points, outlier filter, δ, index, occupancy ----
+    let points_in = cloud.len();
+    let finite: Vec<Vec3> = cloud
+        .points
+        .iter()
+        .copied()
+        .filter(|p| p.iter().all(|c| c.is_finite()))
+        .collect();
+    let points_non_finite = points_in - finite.len();
+    if finite.is_empty() {
+        return Err(CloudError::Empty.into());
+    }
+    if finite.len() < MIN_POINTS {
+        return Err(CloudError::TooFewPoints {
+            got: finite.len(),
+            need: MIN_POINTS,
+        }
+        .into());
+    }
+    let density = Density::new(&finite, cfg.knn_k)?;
+    let d_all = density.per_point();
+    let median_all = density.median();
+    let (points, d_used): (Vec<Vec3>, Vec<f64>) = if cfg.outlier_factor > 0.0 {
+        let limit = cfg.outlier_factor * median_all;
+        let kept: (Vec<Vec3>, Vec<f64>) = finite
+            .iter()
+            .zip(d_all)
+            .filter(|(_, &d)| d <= limit)
+            .map(|(p, &d)| (*p, d))
+            .unzip();
+        if kept.0.len() >= MIN_POINTS {
+            kept
+        } else {
+            (finite.clone(), d_all.to_vec())
+        }
+    } else {
+        (finite.clone(), d_all.to_vec())
+    };
+    let points_outliers = finite.len() - points.len();
+    let bb = Aabb::from_points(&points);
+    let e = bb.extent();
+    let scale = e.max();
+    if scale.is_nan() || scale <= 0.0 || e.min() < 1e-6 * scale {
+        return Err(CloudError::Degenerate {
+            extent: [e.x, e.y, e.z],
+        }
+        .into());
+    }
+    let delta = {
+        let mut v = d_used.clone();
+        let mid = v.len() / 2;
+        let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+        (*m).max(1e-9 * scale)
+    };
+    let index = SpatialIndex::new(&points)?;
+    let searcher = if cfg.local_delta {
+        Searcher::new(&index, Delta::Local(&d_used), cfg.boundaries)?
+    } else {
+        Searcher::new(&index, Delta::Global(delta), cfg.boundaries)?
+    };
+    let outside = if cfg.inward_force {
+        OutsideGrid::new(
+            &points,
+            cfg.inward_voxel_delta * delta,
+            cfg.inward_min_points,
+            1 << 22,
+        )
+    } else {
+        None
+    };
+    let stepper = Stepper {
+        cfg,
+        searcher,
+        delta,
+        outside: outside.as_ref(),
+        cross_max: cfg.cross_max * scale,
+    };
+    times.prepare_ms = ms(t_start);
+
+    // ---- initial surface ----
+    let t_init = Instant::now();
+    let mut fits = Fits {
+        roughness: cfg.roughness,
+        map: HashMap::new(),
+    };
+    let mut surface = match warm {
+        Some(w) => {
+            let mut s = w.surface.clone();
+            s.fix_orientation();
+            s
+        }
+        None => {
+            let [m, l] = cfg.grid_start;
+            let fit = fits.get(cfg, m, l)?;
+            octagon(
+                &points,
+                cfg.pole_axis,
+                cfg.init_quantile,
+                cfg.init_margin,
+                fit,
+            )?
+        }
+    };
+    times.init_ms = ms(t_init);
+
+    // ---- evolution ----
+    let floor = cfg.depth_floor_delta * delta;
+    let mut depth = (if warm.is_some() {
+        cfg.depth_warm
+    } else {
+        cfg.depth_start
+    } * scale)
+        .max(floor);
+    let chunks = 4 * rayon::current_num_threads().max(1);
+    let mut scratches: Vec<SearchScratch> = (0..chunks).map(|_| SearchScratch::new()).collect();
+    let mut outs: Vec<SampleOut> = Vec::new();
+    let mut shifts: Vec<f64> = Vec::new();
+    let mut targets: Vec<Vec3> = Vec::new();
+    let mut eta_hist: Vec<f64> = Vec::new();
+    let mut grids: Vec<[usize; 2]> = Vec::new();
+    let mut iteration_ms: Vec<f64> = Vec::new();
+    let mut iter_on_grid = 0usize;
+    let mut plateau = 0usize;
+    let mut last_iter = 0.0f64;
+    let max_grid = if cfg.adaptive {
+        [
+            cfg.grid_max[0].max(surface.m()),
+            cfg.grid_max[1].max(surface.l()),
+        ]
+    } else {
+        [surface.m(), surface.l()]
+    };
+    let stop = loop {
+        let it = eta_hist.len();
+        if it >= cfg.max_iterations {
+            break StopReason::MaxIterations;
+        }
+        if budget.max_iterations.is_some_and(|n| it >= n) {
+            break StopReason::IterationBudget;
+        }
+        if let Some(dl) = budget.deadline {
+            let now = Instant::now();
+            if now >= dl || (dl - now).as_secs_f64() * 1e3 < last_iter {
+                break StopReason::Deadline;
+            }
+        }
+        let t_it = Instant::now();
+        let (m, l) = (surface.m(), surface.l());
+        let fit = fits.get(cfg, m, l)?;
+        let layout = fit.layout().clone();
+        let t_search = Instant::now();
+        stepper.search_all(&surface, &layout, depth, true, &mut outs, &mut scratches);
+        let eta_g = outs.iter().map(|o| o.eta).sum::<f64>() / outs.len() as f64;
+        if cfg.median_filter {
+            median_filter(&outs, layout.u_n(), layout.v_n(), &mut shifts);
+        } else {
+            shifts.clear();
+            shifts.extend(outs.iter().map(|o| o.shift));
+        }
+        targets.clear();
+        for j in 0..layout.v_n() {
+            for i in 0..layout.u_n() {
+                let sp = surface.eval_at(&layout, i, j);
+                let n = surface.normal(&sp);
+                targets.push(sp.p + n * (cfg.beta * shifts[j * layout.u_n() + i]));
+            }
+        }
+        times.search_ms += ms(t_search);
+        let t_fit = Instant::now();
+        fit.fit(&mut surface, &targets)?;
+        surface.fix_orientation();
+        times.fit_ms += ms(t_fit);
+        grids.push([m, l]);
+        let prev = eta_hist.last().copied();
+        eta_hist.push(eta_g);
+        iter_on_grid += 1;
+        depth = (depth * cfg.depth_decay).max(floor);
+        let gain = prev.map_or(f64::INFINITY, |p| eta_g - p);
+        let can_grow = m < max_grid[0] || l < max_grid[1];
+        if can_grow {
+            if iter_on_grid >= cfg.grow_after.max(1) && gain < cfg.g_min {
+                let t_grow = Instant::now();
+                let nm = (m + cfg.grid_step[0]).min(max_grid[0]);
+                let nl = (l + cfg.grid_step[1]).min(max_grid[1]);
+                let next = fits.get(cfg, nm, nl)?;
+                surface = regrid(&surface, next)?;
+                iter_on_grid = 0;
+                plateau = 0;
+                times.fit_ms += ms(t_grow);
+            }
+        } else {
+            if gain.abs() < cfg.plateau_eps {
+                plateau += 1;
+            } else {
+                plateau = 0;
+            }
+            if plateau >= cfg.plateau_patience.max(1) {
+                iteration_ms.push(ms(t_it));
+                break StopReason::Converged;
+            }
+        }
+        last_iter = ms(t_it);
+        iteration_ms.push(last_iter);
+    };
+
+    // ---- final scoring pass and mesh ----
+    let t_mesh = Instant::now();
+    let (m, l) = (surface.m(), surface.l());
+    let layout = fits.get(cfg, m, l)?.layout().clone();
+    stepper.search_all(&surface, &layout, floor, false, &mut outs, &mut scratches);
+    let eta: Vec<f64> = outs.iter().map(|o| o.eta).collect();
+    let eta_final = eta.iter().sum::<f64>() / eta.len().max(1) as f64;
+    let mesh = extract_mesh(&surface, &layout, &eta);
+    times.mesh_ms = ms(t_mesh);
+    times.total_ms = ms(t_start);
+    let report = Report {
+        points_in,
+        points_non_finite,
+        points_outliers,
+        points_used: points.len(),
+        delta,
+        scale,
+        grid: [m, l],
+        samples: [layout.u_n(), layout.v_n()],
+        iterations: eta_hist.len(),
+        eta: eta_hist,
+        grids,
+        iteration_ms,
+        eta_final,
+        stop,
+        warm: warm.is_some(),
+        times,
+    };
+    Ok(Reconstruction {
+        mesh,
+        surface,
+        report,
+    })
+}

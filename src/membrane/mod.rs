@@ -1,0 +1,234 @@
+//! The Separability Membrane (paper §III-D to §III-F): reconstruct a
+//! watertight mesh of one object from its raw points.
+//!
+//! A closed cubic B-spline surface (paper Eq. 10, [`crate::spline`]) starts
+//! around the object (the "3D octagon" of §III-E, [`init`]) and evolves:
+//!
+//! 1. sample the surface at `u_n × v_n` with `div_n = max(div_min, α(q−1)+1)` (Eq. 14);
+//! 2. at each sample, slide the boundary of a cuboid search region along the
+//!    outward normal and take the position of maximum point separability η*
+//!    (Eq. 7, or the weighted Eq. 9) — the external energy `E_sep = −η*`
+//!    (Eqs. 11–12);
+//! 3. move the sample by `β` times its (robustly centred) shift;
+//! 4. refit the control net by least squares;
+//! 5. track the global separability `η_g` (mean of the per-sample η*) and stop
+//!    on a plateau, at the iteration cap, or when the caller's [`Budget`] runs out.
+//!
+//! Dynamic membrane adjustment (§III-F) grows the control grid (8×5 → 40×25 by
+//! default) whenever `Δη_g < g_min`. On top of the paper's recipe this
+//! implementation adds the mechanisms that decided the outcome in the
+//! prototype (see `notes/prototype-findings.md`): a k-NN outlier filter, δ as
+//! the median k-NN distance, the "inner side denser" rule, a dense-side
+//! significance test, a robust median shift, a 3×3 median filter of shifts,
+//! a roughness-penalised fit, a shrinking search depth with a δ floor, and an
+//! inward force gated by an occupancy inside/outside grid ([`occupancy`]).
+
+pub mod config;
+pub mod evolve;
+pub mod extract;
+pub mod init;
+pub mod occupancy;
+
+pub use config::{AttributeWeight, MembraneConfig, PoleAxis};
+pub use extract::{extract_mesh, SEPARABILITY_CHANNEL};
+
+use crate::cloud::{CloudError, PointCloud};
+use crate::mesh::TriMesh;
+use crate::spline::{ClosedSurface, SplineError};
+use serde::Serialize;
+use std::time::{Duration, Instant};
+use thiserror::Error;
+
+/// Errors of the membrane.
+#[derive(Debug, Error)]
+pub enum MembraneError {
+    /// The input cloud is unusable (empty, too few points, flat).
+    #[error("membrane input: {0}")]
+    Cloud(#[from] CloudError),
+    /// The density estimate failed.
+    #[error("membrane density: {0}")]
+    Density(#[from] crate::density::DensityError),
+    /// The spatial index could not be built.
+    #[error("membrane spatial index: {0}")]
+    Index(#[from] crate::separability::grid::GridError),
+    /// The search primitive rejected its parameters.
+    #[error("membrane search: {0}")]
+    Search(#[from] crate::separability::search::SearchError),
+    /// The spline surface or its fit failed.
+    #[error("membrane surface: {0}")]
+    Spline(#[from] SplineError),
+    /// A configuration value is out of range.
+    #[error("membrane config: `{key}` {problem}")]
+    Config {
+        /// Parameter name.
+        key: &'static str,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// An attribute named in the config is not carried by the cloud.
+    #[error("membrane: attribute `{0}` named in membrane.attributes is not in the input cloud")]
+    MissingAttribute(String),
+    /// The worker thread pool could not be created.
+    #[error("membrane: cannot create a thread pool: {0}")]
+    ThreadPool(String),
+}
+
+/// What the caller allows one reconstruction to spend.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Budget {
+    /// At most this many iterations (in addition to the config's cap).
+    pub max_iterations: Option<usize>,
+    /// Stop starting iterations that would end after this instant.
+    pub deadline: Option<Instant>,
+}
+
+impl Budget {
+    /// No limit beyond the configuration's own iteration cap.
+    pub fn unlimited() -> Self {
+        Self::default()
+    }
+
+    /// At most `n` iterations.
+    pub fn iterations(n: usize) -> Self {
+        Self {
+            max_iterations: Some(n),
+            deadline: None,
+        }
+    }
+
+    /// A wall-clock budget of `d` from now.
+    pub fn within(d: Duration) -> Self {
+        Self {
+            max_iterations: None,
+            deadline: Some(Instant::now() + d),
+        }
+    }
+}
+
+/// A previous surface to start from (the node's frame-to-frame warm start).
+#[derive(Debug, Clone, PartialEq)]
+pub struct WarmStart {
+    /// The surface to continue from (its grid size is kept).
+    pub surface: ClosedSurface,
+}
+
+/// Why the evolution stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StopReason {
+    /// η_g reached a plateau on the final grid.
+    Converged,
+    /// The configuration's `max_iterations` was reached.
+    MaxIterations,
+    /// The caller's iteration budget was used up.
+    IterationBudget,
+    /// The caller's deadline would have been passed by another iteration.
+    Deadline,
+}
+
+impl std::fmt::Display for StopReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Converged => "converged",
+            Self::MaxIterations => "max_iterations",
+            Self::IterationBudget => "iteration_budget",
+            Self::Deadline => "deadline",
+        })
+    }
+}
+
+/// Wall-clock time per phase, in milliseconds.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct PhaseTimes {
+    /// Outlier filter, density, spatial index, occupancy grid.
+    pub prepare_ms: f64,
+    /// Initial surface (octagon fit or warm start).
+    pub init_ms: f64,
+    /// Per-sample separability searches (all iterations).
+    pub search_ms: f64,
+    /// Least-squares refits, factorisations and regrids.
+    pub fit_ms: f64,
+    /// Final scoring pass and mesh extraction.
+    pub mesh_ms: f64,
+    /// Everything.
+    pub total_ms: f64,
+}
+
+/// What one reconstruction did.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Report {
+    /// Points in the input.
+    pub points_in: usize,
+    /// Points dropped as NaN/inf.
+    pub points_non_finite: usize,
+    /// Points dropped by the k-NN outlier filter.
+    pub points_outliers: usize,
+    /// Points the membrane used.
+    pub points_used: usize,
+    /// Global point spacing δ (median k-NN distance) in input units.
+    pub delta: f64,
+    /// Object size (longest bounding-box edge of the used points) in input units.
+    pub scale: f64,
+    /// Final control grid `[M, L]`.
+    pub grid: [usize; 2],
+    /// Final sample grid `[u_n, v_n]` (also the mesh resolution).
+    pub samples: [usize; 2],
+    /// Iterations run.
+    pub iterations: usize,
+    /// η_g of the surface at the start of each iteration.
+    pub eta: Vec<f64>,
+    /// Control grid of each iteration.
+    pub grids: Vec<[usize; 2]>,
+    /// Wall-clock duration of each iteration (ms).
+    pub iteration_ms: Vec<f64>,
+    /// η_g of the returned surface.
+    pub eta_final: f64,
+    /// Why the evolution stopped.
+    pub stop: StopReason,
+    /// Whether it started from a warm start.
+    pub warm: bool,
+    /// Time per phase.
+    pub times: PhaseTimes,
+}
+
+/// The result of [`reconstruct`].
+#[derive(Debug, Clone)]
+pub struct Reconstruction {
+    /// Watertight, outward-oriented mesh with a per-vertex `separability` channel.
+    pub mesh: TriMesh,
+    /// The final surface (pass it back as a [`WarmStart`] for the next frame).
+    pub surface: ClosedSurface,
+    /// What happened.
+    pub report: Report,
+}
+
+impl Reconstruction {
+    /// A warm start for the next reconstruction of the same object.
+    pub fn warm_start(&self) -> WarmStart {
+        WarmStart {
+            surface: self.surface.clone(),
+        }
+    }
+}
+
+/// Reconstruct a watertight mesh of the object whose points are `cloud`.
+///
+/// # Errors
+/// [`MembraneError`] for an unusable cloud (empty, too few points, flat), an
+/// invalid configuration, or a missing attribute in weighted mode.
+pub fn reconstruct(
+    cloud: &PointCloud,
+    cfg: &MembraneConfig,
+    budget: &Budget,
+    warm: Option<&WarmStart>,
+) -> Result<Reconstruction, MembraneError> {
+    evolve::validate(cfg)?;
+    if cfg.threads == 0 {
+        return evolve::run(cloud, cfg, budget, warm);
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(cfg.threads)
+        .build()
+        .map_err(|e| MembraneError::ThreadPool(e.to_string()))?;
+    pool.install(|| evolve::run(cloud, cfg, budget, warm))
+}

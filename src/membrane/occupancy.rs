@@ -1,0 +1,208 @@
+//! Inside/outside test independent of the membrane, for the gated inward force.
+//!
+//! The paper's external energy (Eq. 12, `E_sep = −η*`) only attracts the
+//! membrane to point layers inside its search cuboid; across the empty
+//! opening of a concavity (a bowl, the space between a mug and its handle)
+//! nothing pulls it in. This grid supplies the missing inward force, but
+//! only where the membrane is provably outside the object:
+//!
+//! 1. voxelise the cloud at `voxel = c·δ`;
+//! 2. a voxel is *occupied* when its 3×3×3 neighbourhood holds at least
+//!    `min_points` points (sparse outliers do not occupy);
+//! 3. occupied voxels are dilated once, then the empty voxels connected to
+//!    the grid border (flood fill, 6-connectivity) are *outside*.
+//!
+//! Everything else (the shell and the cavity it encloses) is inside.
+
+use crate::cloud::Vec3;
+
+/// A voxel grid labelling space outside the object.
+#[derive(Debug, Clone)]
+pub struct OutsideGrid {
+    origin: Vec3,
+    inv_voxel: f64,
+    dims: [usize; 3],
+    outside: Vec<bool>,
+}
+
+impl OutsideGrid {
+    /// Build from points with the given voxel edge and occupancy threshold.
+    /// The grid is padded by two voxels around the points' bounding box; at
+    /// most `max_cells` cells are used (the voxel is enlarged if needed).
+    pub fn new(points: &[Vec3], voxel: f64, min_points: usize, max_cells: usize) -> Option<Self> {
+        if points.is_empty() || voxel.is_nan() || voxel <= 0.0 || !voxel.is_finite() {
+            return None;
+        }
+        let mut lo = Vec3::repeat(f64::INFINITY);
+        let mut hi = Vec3::repeat(f64::NEG_INFINITY);
+        for p in points {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+        let mut voxel = voxel;
+        let mut dims;
+        loop {
+            let ext = (hi - lo) / voxel;
+            dims = [
+                ext.x.ceil() as usize + 5,
+                ext.y.ceil() as usize + 5,
+                ext.z.ceil() as usize + 5,
+            ];
+            if dims[0].saturating_mul(dims[1]).saturating_mul(dims[2]) <= max_cells.max(125) {
+                break;
+            }
+            voxel *= 1.25;
+        }
+        let origin = lo - Vec3::repeat(2.0 * voxel);
+        let inv_voxel = 1.0 / voxel;
+        let [nx, ny, nz] = dims;
+        let cells = nx * ny * nz;
+        let id = |x: usize, y: usize, z: usize| (z * ny + y) * nx + x;
+        let mut count = vec![0u32; cells];
+        for p in points {
+            let q = (p - origin) * inv_voxel;
+            let (x, y, z) = (q.x as usize, q.y as usize, q.z as usize);
+            if x < nx && y < ny && z < nz {
+                count[id(x, y, z)] += 1;
+            }
+        }
+        // 3×3×3 box sum, separable along x, y, z.
+        let mut a = count;
+        let mut b = vec![0u32; cells];
+        for axis in 0..3 {
+            for z in 0..nz {
+                for y in 0..ny {
+                    for x in 0..nx {
+                        let c = [x, y, z];
+                        let mut s = 0;
+                        for d in [-1i64, 0, 1] {
+                            let k = c[axis] as i64 + d;
+                            if k < 0 || k >= dims[axis] as i64 {
+                                continue;
+                            }
+                            let mut cc = c;
+                            cc[axis] = k as usize;
+                            s += a[id(cc[0], cc[1], cc[2])];
+                        }
+                        b[id(x, y, z)] = s;
+                    }
+                }
+            }
+            std::mem::swap(&mut a, &mut b);
+        }
+        let occupied: Vec<bool> = a.iter().map(|&c| c as usize >= min_points).collect();
+        // Dilate once (6-neighbourhood).
+        let mut solid = occupied.clone();
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    if occupied[id(x, y, z)] {
+                        continue;
+                    }
+                    let near = (x > 0 && occupied[id(x - 1, y, z)])
+                        || (x + 1 < nx && occupied[id(x + 1, y, z)])
+                        || (y > 0 && occupied[id(x, y - 1, z)])
+                        || (y + 1 < ny && occupied[id(x, y + 1, z)])
+                        || (z > 0 && occupied[id(x, y, z - 1)])
+                        || (z + 1 < nz && occupied[id(x, y, z + 1)]);
+                    solid[id(x, y, z)] = near;
+                }
+            }
+        }
+        // Flood fill the empty space from the border.
+        let mut outside = vec![false; cells];
+        let mut stack: Vec<(usize, usize, usize)> = Vec::new();
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    let border =
+                        x == 0 || y == 0 || z == 0 || x + 1 == nx || y + 1 == ny || z + 1 == nz;
+                    if border && !solid[id(x, y, z)] && !outside[id(x, y, z)] {
+                        outside[id(x, y, z)] = true;
+                        stack.push((x, y, z));
+                    }
+                }
+            }
+        }
+        while let Some((x, y, z)) = stack.pop() {
+            let mut visit = |x: usize, y: usize, z: usize| {
+                let c = id(x, y, z);
+                if !solid[c] && !outside[c] {
+                    outside[c] = true;
+                    stack.push((x, y, z));
+                }
+            };
+            if x > 0 {
+                visit(x - 1, y, z);
+            }
+            if x + 1 < nx {
+                visit(x + 1, y, z);
+            }
+            if y > 0 {
+                visit(x, y - 1, z);
+            }
+            if y + 1 < ny {
+                visit(x, y + 1, z);
+            }
+            if z > 0 {
+                visit(x, y, z - 1);
+            }
+            if z + 1 < nz {
+                visit(x, y, z + 1);
+            }
+        }
+        Some(Self {
+            origin,
+            inv_voxel,
+            dims,
+            outside,
+        })
+    }
+
+    /// True when `p` lies in empty space connected to the outside (points
+    /// beyond the grid are outside).
+    pub fn is_outside(&self, p: &Vec3) -> bool {
+        let q = (p - self.origin) * self.inv_voxel;
+        if !(q.x >= 0.0 && q.y >= 0.0 && q.z >= 0.0) {
+            return true;
+        }
+        let (x, y, z) = (q.x as usize, q.y as usize, q.z as usize);
+        let [nx, ny, nz] = self.dims;
+        if x >= nx || y >= ny || z >= nz {
+            return true;
+        }
+        self.outside[(z * ny + y) * nx + x]
+    }
+
+    /// Fraction of cells labelled outside (diagnostics).
+    pub fn outside_fraction(&self) -> f64 {
+        self.outside.iter().filter(|&&o| o).count() as f64 / self.outside.len().max(1) as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sphere_interior_is_inside_and_far_space_outside() {
+        let mut pts = Vec::new();
+        let n = 4000;
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        for i in 0..n {
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - z * z).sqrt();
+            let th = golden * i as f64;
+            pts.push(Vec3::new(r * th.cos(), r * th.sin(), z));
+        }
+        let g = OutsideGrid::new(&pts, 0.1, 11, 1 << 20).unwrap();
+        assert!(!g.is_outside(&Vec3::zeros()));
+        assert!(!g.is_outside(&Vec3::new(0.5, 0.0, 0.0)));
+        assert!(g.is_outside(&Vec3::new(1.3, 0.0, 0.0)));
+        assert!(g.is_outside(&Vec3::new(5.0, 5.0, 5.0)));
+        // A bowl (lower hemisphere only): its opening is outside.
+        let bowl: Vec<Vec3> = pts.iter().copied().filter(|p| p.z < 0.0).collect();
+        let g = OutsideGrid::new(&bowl, 0.1, 11, 1 << 20).unwrap();
+        assert!(g.is_outside(&Vec3::new(0.0, 0.0, -0.5)));
+    }
+}

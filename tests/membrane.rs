@@ -1,0 +1,224 @@
+//! End-to-end tests of the separability membrane: convergence on analytic
+//! shapes (F-score against the true surface), robustness to outliers, warm
+//! start, budgets, and watertight outward output meshes.
+#![allow(clippy::unwrap_used)]
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use sepmem::membrane::{reconstruct, Budget, MembraneConfig, StopReason, WarmStart};
+use sepmem::{PointCloud, TriMesh, Vec3};
+use std::time::{Duration, Instant};
+
+/// Area-uniform random points on the ellipsoid with semi-axes `a`, centred
+/// at `c`: uniform directions mapped onto the ellipsoid, accepted with
+/// probability proportional to the map's area element `a_x a_y a_z ‖d/a‖`.
+fn ellipsoid(n: usize, a: Vec3, c: Vec3, seed: u64) -> Vec<Vec3> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let normal = Normal::new(0.0, 1.0).unwrap();
+    let mut out = Vec::with_capacity(n);
+    while out.len() < n {
+        let d = Vec3::new(
+            normal.sample(&mut rng),
+            normal.sample(&mut rng),
+            normal.sample(&mut rng),
+        )
+        .normalize();
+        let accept = a.min() * Vec3::new(d.x / a.x, d.y / a.y, d.z / a.z).norm();
+        if rng.random::<f64>() <= accept {
+            out.push(d.component_mul(&a) + c);
+        }
+    }
+    out
+}
+
+fn sample_mesh(mesh: &TriMesh, n: usize, seed: u64) -> Vec<Vec3> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let areas: Vec<f64> = (0..mesh.triangles.len())
+        .map(|t| {
+            let [a, b, c] = mesh.corners(t);
+            0.5 * (b - a).cross(&(c - a)).norm()
+        })
+        .collect();
+    let total: f64 = areas.iter().sum();
+    let mut cum = Vec::with_capacity(areas.len());
+    let mut s = 0.0;
+    for a in &areas {
+        s += a / total;
+        cum.push(s);
+    }
+    (0..n)
+        .map(|_| {
+            let r: f64 = rng.random();
+            let t = cum.partition_point(|&c| c < r).min(areas.len() - 1);
+            let [a, b, c] = mesh.corners(t);
+            let (mut u, mut v): (f64, f64) = (rng.random(), rng.random());
+            if u + v > 1.0 {
+                u = 1.0 - u;
+                v = 1.0 - v;
+            }
+            a + (b - a) * u + (c - a) * v
+        })
+        .collect()
+}
+
+/// F-score at τ (absolute) between two point samples.
+fn fscore(pred: &[Vec3], gt: &[Vec3], tau: f64) -> f64 {
+    let tree = |pts: &[Vec3]| {
+        let c: Vec<[f64; 3]> = pts.iter().map(|p| [p.x, p.y, p.z]).collect();
+        ImmutableKdTree::<f64, 3>::new_from_slice(&c)
+    };
+    let (tp, tg) = (tree(pred), tree(gt));
+    let frac = |from: &[Vec3], to: &ImmutableKdTree<f64, 3>| {
+        from.iter()
+            .filter(|p| {
+                to.nearest_one::<SquaredEuclidean>(&[p.x, p.y, p.z])
+                    .distance
+                    <= tau * tau
+            })
+            .count() as f64
+            / from.len() as f64
+    };
+    let precision = frac(pred, &tg);
+    let recall = frac(gt, &tp);
+    if precision + recall == 0.0 {
+        0.0
+    } else {
+        2.0 * precision * recall / (precision + recall)
+    }
+}
+
+fn check_mesh(mesh: &TriMesh) {
+    let topo = mesh.topology();
+    assert!(topo.is_watertight(), "mesh not watertight: {topo:?}");
+    assert!(mesh.signed_volume() > 0.0, "mesh not outward");
+    let eta = mesh.scalar("separability").unwrap();
+    assert_eq!(eta.len(), mesh.vertices.len());
+    assert!(eta
+        .iter()
+        .all(|e| e.is_finite() && *e >= 0.0 && *e <= 1.0 + 1e-6));
+}
+
+fn serial() -> MembraneConfig {
+    MembraneConfig {
+        threads: 1,
+        ..MembraneConfig::default()
+    }
+}
+
+fn score(mesh: &TriMesh, gt_dense: &[Vec3]) -> f64 {
+    fscore(&sample_mesh(mesh, 100_000, 7), gt_dense, 0.01)
+}
+
+#[test]
+fn sphere_converges() {
+    let a = Vec3::repeat(0.5);
+    let c = Vec3::new(0.3, -0.2, 1.0);
+    let cloud = PointCloud::from_points(ellipsoid(8_000, a, c, 1));
+    let rec = reconstruct(&cloud, &serial(), &Budget::unlimited(), None).unwrap();
+    check_mesh(&rec.mesh);
+    let f = score(&rec.mesh, &ellipsoid(100_000, a, c, 99));
+    eprintln!("sphere: F={f:.4} report={:?}", rec.report);
+    assert!(f >= 0.97, "sphere F = {f}");
+}
+
+#[test]
+fn ellipsoid_converges() {
+    let a = Vec3::new(0.5, 0.3, 0.2);
+    let c = Vec3::zeros();
+    let cloud = PointCloud::from_points(ellipsoid(8_000, a, c, 2));
+    let rec = reconstruct(&cloud, &serial(), &Budget::unlimited(), None).unwrap();
+    check_mesh(&rec.mesh);
+    let f = score(&rec.mesh, &ellipsoid(100_000, a, c, 98));
+    eprintln!("ellipsoid: F={f:.4} report={:?}", rec.report);
+    assert!(f >= 0.97, "ellipsoid F = {f}");
+}
+
+#[test]
+fn warm_start_converges_faster_than_cold() {
+    let a = Vec3::new(0.5, 0.4, 0.35);
+    let cloud0 = PointCloud::from_points(ellipsoid(6_000, a, Vec3::zeros(), 5));
+    let cfg = serial();
+    let first = reconstruct(&cloud0, &cfg, &Budget::unlimited(), None).unwrap();
+    // The object moved slightly: the previous surface is a warm start.
+    let shift = Vec3::new(0.015, -0.01, 0.01);
+    let moved: Vec<Vec3> = ellipsoid(6_000, a, shift, 6);
+    let cloud1 = PointCloud::from_points(moved);
+    let cold = reconstruct(&cloud1, &cfg, &Budget::unlimited(), None).unwrap();
+    let warm = reconstruct(
+        &cloud1,
+        &cfg,
+        &Budget::unlimited(),
+        Some(&WarmStart {
+            surface: first.surface.clone(),
+        }),
+    )
+    .unwrap();
+    check_mesh(&warm.mesh);
+    let gt = ellipsoid(100_000, a, shift, 96);
+    let (fc, fw) = (score(&cold.mesh, &gt), score(&warm.mesh, &gt));
+    eprintln!(
+        "cold: {} iterations F={fc:.4}; warm: {} iterations F={fw:.4}",
+        cold.report.iterations, warm.report.iterations
+    );
+    assert!(warm.report.warm);
+    assert!(warm.report.iterations < cold.report.iterations);
+    assert!(fw >= 0.97, "warm F = {fw}");
+}
+
+#[test]
+fn iteration_budget_and_deadline_are_respected() {
+    let a = Vec3::new(0.5, 0.4, 0.3);
+    let cloud = PointCloud::from_points(ellipsoid(20_000, a, Vec3::zeros(), 8));
+    let cfg = serial();
+    let rec = reconstruct(&cloud, &cfg, &Budget::iterations(3), None).unwrap();
+    check_mesh(&rec.mesh);
+    assert_eq!(rec.report.iterations, 3);
+    assert_eq!(rec.report.stop, StopReason::IterationBudget);
+
+    // A deadline already passed: no iteration, still a valid enclosing mesh.
+    let past = Budget {
+        max_iterations: None,
+        deadline: Some(Instant::now()),
+    };
+    let rec = reconstruct(&cloud, &cfg, &past, None).unwrap();
+    check_mesh(&rec.mesh);
+    assert_eq!(rec.report.iterations, 0);
+    assert_eq!(rec.report.stop, StopReason::Deadline);
+
+    // A short deadline: the run stops early and overshoots by at most one
+    // iteration (plus the final mesh pass and scheduling slack).
+    let full = reconstruct(&cloud, &cfg, &Budget::unlimited(), None).unwrap();
+    let allowed = Duration::from_secs_f64(full.report.times.total_ms / 3e3);
+    let t0 = Instant::now();
+    let rec = reconstruct(&cloud, &cfg, &Budget::within(allowed), None).unwrap();
+    let elapsed = t0.elapsed().as_secs_f64() * 1e3;
+    check_mesh(&rec.mesh);
+    assert_eq!(rec.report.stop, StopReason::Deadline);
+    assert!(rec.report.iterations < full.report.iterations);
+    let longest = rec.report.iteration_ms.iter().copied().fold(0.0, f64::max);
+    let limit = allowed.as_secs_f64() * 1e3 + longest + rec.report.times.mesh_ms + 50.0;
+    assert!(elapsed <= limit, "elapsed {elapsed:.1} ms > {limit:.1} ms");
+}
+
+#[test]
+fn bad_inputs_give_errors_not_panics() {
+    let cfg = serial();
+    assert!(reconstruct(&PointCloud::default(), &cfg, &Budget::unlimited(), None).is_err());
+    let nan = PointCloud::from_points(vec![Vec3::new(f64::NAN, 0.0, 0.0); 100]);
+    assert!(reconstruct(&nan, &cfg, &Budget::unlimited(), None).is_err());
+    let flat = PointCloud::from_points(
+        (0..500)
+            .map(|i| Vec3::new((i % 25) as f64, (i / 25) as f64, 0.0))
+            .collect(),
+    );
+    assert!(reconstruct(&flat, &cfg, &Budget::unlimited(), None).is_err());
+    let bad = MembraneConfig {
+        beta: 0.0,
+        ..serial()
+    };
+    let ok = PointCloud::from_points(ellipsoid(500, Vec3::repeat(0.5), Vec3::zeros(), 9));
+    let err = reconstruct(&ok, &bad, &Budget::unlimited(), None).unwrap_err();
+    assert!(err.to_string().contains("beta"), "{err}");
+}
