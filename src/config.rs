@@ -67,6 +67,8 @@ pub struct Config {
     pub density: crate::density::DensityConfig,
     /// Separability search (paper §III-B/C).
     pub separability: crate::separability::SeparabilityConfig,
+    /// Evaluation metrics (`sepmem eval`, benchmarks).
+    pub metrics: crate::metrics::MetricsConfig,
     /// The separability membrane (paper §III-D to §III-F): see [`crate::membrane::MembraneConfig`].
     pub membrane: crate::membrane::MembraneConfig,
     /// ROS 2 wire limits (PointCloud2 decoding).

@@ -16,6 +16,7 @@
 //! | [`node`] | the live node: per-stream keep-latest slots, rayon compute, diagnostics, eviction, sharding |
 //! | [`transport`] | ROS 2 wire compatibility over zenoh: rmw_zenoh keys, attachments, liveliness tokens; sessions |
 //! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
+//! | [`metrics`] | Chamfer, F-score and normal consistency (ONet/SAP protocol), surface sampling |
 //! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
 //! | [`bench`] | `sepmem bench`: the paper's evaluation, reproduced (input conditions, runner, reports) |
 //! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
@@ -35,6 +36,7 @@ pub mod density;
 pub mod error;
 pub mod membrane;
 pub mod mesh;
+pub mod metrics;
 pub mod node;
 pub mod separability;
 pub mod shapes;

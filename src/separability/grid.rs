@@ -60,6 +60,7 @@ pub struct SpatialIndex {
     /// Original cloud index of each sorted entry.
     sorted_index: Vec<u32>,
     skipped: usize,
+    source_len: usize,
 }
 
 impl SpatialIndex {
@@ -116,6 +117,7 @@ impl SpatialIndex {
                 sorted: Vec::new(),
                 sorted_index: Vec::new(),
                 skipped,
+                source_len: points.len(),
             });
         }
         let extent = maxc - min;
@@ -172,6 +174,7 @@ impl SpatialIndex {
             sorted,
             sorted_index,
             skipped,
+            source_len: points.len(),
         })
     }
 
@@ -188,6 +191,12 @@ impl SpatialIndex {
     /// Number of non-finite input points left out.
     pub fn skipped(&self) -> usize {
         self.skipped
+    }
+
+    /// Length of the slice the index was built from (indexed points plus
+    /// skipped ones); reported indices are below this.
+    pub fn source_len(&self) -> usize {
+        self.source_len
     }
 
     /// Cell edge length.

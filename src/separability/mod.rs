@@ -2,14 +2,20 @@
 //!
 //! * [`point`]: point separability η_p from actual and estimated non-data
 //!   counts (paper Eqs. 4, 7, 8);
+//! * [`attribute`]: attribute separability (Fisher ratio, Eq. 1) and the
+//!   weighted separability (Eq. 9);
 //! * [`grid`]: the spatial index that gathers the points of a search cuboid;
 //! * [`search`]: the oriented search primitive: the separability profile
 //!   over K boundary positions along a direction, and its argmax.
 
+pub mod attribute;
 pub mod grid;
 pub mod point;
 pub mod search;
 
+pub use attribute::{
+    AttributeChannel, AttributeError, AttributeSet, AttributeWeights, ChannelWeight,
+};
 pub use grid::{GridError, OrientedBox, SpatialIndex};
 pub use point::{eta_from_counts, non_data_count, point_separability, PointSeparability};
 pub use search::{
@@ -26,6 +32,10 @@ pub struct SeparabilityConfig {
     pub boundaries: usize,
     /// Use the local δ_R of each cuboid (paper Eq. 6) instead of the cloud's global δ.
     pub local_delta: bool,
+    /// Weights of the separability vector [η_p, η_a1, …] (paper Eq. 9).
+    pub weights: AttributeWeights,
+    /// Radius of the local-density attribute, in units of the global δ.
+    pub density_radius: f64,
 }
 
 impl Default for SeparabilityConfig {
@@ -33,6 +43,8 @@ impl Default for SeparabilityConfig {
         Self {
             boundaries: 30,
             local_delta: false,
+            weights: AttributeWeights::default(),
+            density_radius: 2.0,
         }
     }
 }

@@ -29,6 +29,7 @@
 
 use crate::cloud::Vec3;
 use crate::density::local_mean;
+use crate::separability::attribute::{fisher_ratio, AttributeSet};
 use crate::separability::grid::{OrientedBox, SpatialIndex};
 use crate::separability::point::{eta_from_counts, non_data_count};
 use thiserror::Error;
@@ -59,13 +60,21 @@ pub enum SearchError {
     #[error("search: global delta {0} is not a positive finite length")]
     BadDelta(f64),
     /// The per-point density does not cover the indexed cloud.
-    #[error(
-        "search: local delta has {got} per-point values for a cloud indexed with {need} points"
-    )]
+    #[error("search: local delta has {got} per-point values for a cloud of {need} points")]
     DensityLength {
         /// Values given.
         got: usize,
-        /// Points in the index (at least).
+        /// Points in the cloud the index was built from.
+        need: usize,
+    },
+    /// An attribute channel does not cover the indexed cloud.
+    #[error("search: attribute `{name}` has {got} values for a cloud of {need} points")]
+    AttributeLength {
+        /// Channel name.
+        name: String,
+        /// Values given.
+        got: usize,
+        /// Points in the cloud.
         need: usize,
     },
 }
@@ -231,6 +240,16 @@ pub struct SearchScratch {
     slab_counts: Vec<u32>,
     profile: Vec<BoundaryStats>,
     band: Vec<f64>,
+    slab_of: Vec<u32>,
+    /// Per channel and slab: (Σa, Σa²), channel-major.
+    attr_sums: Vec<[f64; 2]>,
+    /// Running prefix (Σa, Σa²) per channel.
+    attr_run: Vec<[f64; 2]>,
+    /// Totals (Σa, Σa²) per channel.
+    attr_tot: Vec<[f64; 2]>,
+    /// η of each channel per boundary, boundary-major.
+    attr_eta: Vec<f64>,
+    channels: usize,
     slab_width: f64,
 }
 
@@ -258,6 +277,18 @@ impl SearchScratch {
     /// Point count of each of the `K + 1` slabs, innermost first.
     pub fn slab_counts(&self) -> &[u32] {
         &self.slab_counts
+    }
+
+    /// Number of attribute channels of the last search (0 without attributes).
+    pub fn attribute_count(&self) -> usize {
+        self.channels
+    }
+
+    /// Attribute separabilities η_a (Eq. 1) at boundary `k`, in the order of
+    /// [`AttributeSet::channels`]; empty without attributes or out of range.
+    pub fn attribute_eta(&self, k: usize) -> &[f64] {
+        let c = self.channels;
+        self.attr_eta.get(k * c..(k + 1) * c).unwrap_or(&[])
     }
 
     /// Slab width `Δ = M_d / (K + 1)` of the last search.
@@ -300,6 +331,7 @@ pub struct Searcher<'a> {
     index: &'a SpatialIndex,
     delta: Delta<'a>,
     boundaries: usize,
+    attributes: Option<&'a AttributeSet>,
 }
 
 impl<'a> Searcher<'a> {
@@ -321,10 +353,10 @@ impl<'a> Searcher<'a> {
             Delta::Global(d) if !(d.is_finite() && d > 0.0) => {
                 return Err(SearchError::BadDelta(d));
             }
-            Delta::Local(per_point) if per_point.len() < index.len() => {
+            Delta::Local(per_point) if per_point.len() < index.source_len() => {
                 return Err(SearchError::DensityLength {
                     got: per_point.len(),
-                    need: index.len(),
+                    need: index.source_len(),
                 });
             }
             _ => {}
@@ -333,7 +365,27 @@ impl<'a> Searcher<'a> {
             index,
             delta,
             boundaries,
+            attributes: None,
         })
+    }
+
+    /// Enable the weighted separability η_w (paper Eq. 9) with `attributes`.
+    /// Each boundary's `eta` then is η_w, `eta_point` stays η_p. A set
+    /// without channels and with a positive point weight behaves like η_p alone.
+    ///
+    /// # Errors
+    /// [`SearchError::AttributeLength`] when a channel does not cover the cloud.
+    pub fn with_attributes(mut self, attributes: &'a AttributeSet) -> Result<Self, SearchError> {
+        let need = self.index.source_len();
+        if let Some(c) = attributes.channels().iter().find(|c| c.values.len() < need) {
+            return Err(SearchError::AttributeLength {
+                name: c.name.clone(),
+                got: c.values.len(),
+                need,
+            });
+        }
+        self.attributes = Some(attributes);
+        Ok(self)
     }
 
     /// Number of boundary positions K.
@@ -364,14 +416,16 @@ impl<'a> Searcher<'a> {
 
         scratch.offsets.clear();
         scratch.indices.clear();
+        scratch.slab_of.clear();
         scratch.slab_counts.clear();
         scratch.slab_counts.resize(slabs, 0);
         scratch.slab_width = slab_width;
         {
-            let (offsets, indices, counts) = (
+            let (offsets, indices, counts, slab_of) = (
                 &mut scratch.offsets,
                 &mut scratch.indices,
                 &mut scratch.slab_counts,
+                &mut scratch.slab_of,
             );
             self.index.for_each_in_box(&obb, |i, s| {
                 let t = s[0];
@@ -379,8 +433,34 @@ impl<'a> Searcher<'a> {
                 counts[slab] += 1;
                 offsets.push(t);
                 indices.push(i);
+                slab_of.push(slab as u32);
             });
         }
+        // Attribute running sums per slab (Eq. 1 from (count, Σa, Σa²)).
+        let channels = self.attributes.map_or(&[][..], |a| a.channels());
+        let nch = channels.len();
+        scratch.channels = nch;
+        scratch.attr_eta.clear();
+        scratch.attr_sums.clear();
+        scratch.attr_sums.resize(nch * slabs, [0.0; 2]);
+        scratch.attr_run.clear();
+        scratch.attr_run.resize(nch, [0.0; 2]);
+        scratch.attr_tot.clear();
+        scratch.attr_tot.resize(nch, [0.0; 2]);
+        for (ch, channel) in channels.iter().enumerate() {
+            let sums = &mut scratch.attr_sums[ch * slabs..(ch + 1) * slabs];
+            let tot = &mut scratch.attr_tot[ch];
+            for (&i, &slab) in scratch.indices.iter().zip(&scratch.slab_of) {
+                let v = channel.values.get(i as usize).copied().unwrap_or(0.0);
+                let cell = &mut sums[slab as usize];
+                cell[0] += v;
+                cell[1] += v * v;
+                tot[0] += v;
+                tot[1] += v * v;
+            }
+        }
+        let point_weight = self.attributes.map_or(1.0, |a| a.point_weight());
+        let total_weight = self.attributes.map_or(1.0, |a| a.total_weight());
         let gathered = scratch.offsets.len();
         let delta = match self.delta {
             Delta::Global(d) => d,
@@ -404,6 +484,26 @@ impl<'a> Searcher<'a> {
             let b2 = non_data_count(vol2, delta, fo2);
             let (n1, n2) = (fo1 + b1, fo2 + b2);
             let eta_point = eta_from_counts(fo1, b1, fo2, b2);
+            let mut eta = eta_point;
+            if nch > 0 {
+                let mut num = point_weight * eta_point;
+                for (ch, channel) in channels.iter().enumerate() {
+                    let add = scratch.attr_sums[ch * slabs + k];
+                    let run = &mut scratch.attr_run[ch];
+                    run[0] += add[0];
+                    run[1] += add[1];
+                    let tot = scratch.attr_tot[ch];
+                    let eta_a =
+                        fisher_ratio(fo1, run[0], run[1], fo2, tot[0] - run[0], tot[1] - run[1]);
+                    scratch.attr_eta.push(eta_a);
+                    num += channel.weight * eta_a;
+                }
+                eta = if total_weight > 0.0 {
+                    num / total_weight
+                } else {
+                    0.0
+                };
+            }
             let offset = -half_depth + slab_width * (k + 1) as f64;
             let stats = BoundaryStats {
                 offset,
@@ -414,7 +514,7 @@ impl<'a> Searcher<'a> {
                 mu1: if n1 > 0.0 { fo1 / n1 } else { 0.0 },
                 mu2: if n2 > 0.0 { fo2 / n2 } else { 0.0 },
                 eta_point,
-                eta: eta_point,
+                eta,
             };
             if stats.eta > 0.0 && best.is_none_or(|b| stats.eta > b.eta) {
                 best = Some(Best {
@@ -656,6 +756,119 @@ mod tests {
         // The dense layer at z = 0 is at offset −0.05 (up) and +0.05 (down).
         assert!((up.offset - -0.05).abs() <= dw + 1e-9, "{up:?}");
         assert!((down.offset - 0.05).abs() <= dw + 1e-9, "{down:?}");
+    }
+
+    #[test]
+    fn weighted_profile_matches_brute_force() {
+        use crate::separability::attribute::AttributeSet;
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let pts: Vec<Vec3> = (0..3000)
+            .map(|_| {
+                Vec3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-0.2..0.2),
+                )
+            })
+            .collect();
+        let vals: Vec<f32> = pts
+            .iter()
+            .map(|p| 100.0 + (p.x * 3.0).sin() as f32 + rng.random_range(-0.3f32..0.3))
+            .collect();
+        let set = AttributeSet::new(1.0, &[("intensity", &vals, 2.0)]).unwrap();
+        let idx = SpatialIndex::new(&pts).unwrap();
+        let s = Searcher::new(&idx, Delta::Global(0.05), 12)
+            .unwrap()
+            .with_attributes(&set)
+            .unwrap();
+        let mut scratch = SearchScratch::new();
+        for q in 0..20 {
+            let cub = Cuboid::new(
+                Vec3::new(
+                    rng.random_range(-0.5..0.5),
+                    rng.random_range(-0.5..0.5),
+                    0.0,
+                ),
+                Vec3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    0.1,
+                ),
+                0.3,
+                0.3,
+                0.8,
+            );
+            s.search(&cub, &mut scratch).unwrap();
+            assert_eq!(scratch.attribute_count(), 1);
+            let gathered: Vec<(f64, f64)> = scratch
+                .offsets()
+                .iter()
+                .zip(scratch.indices())
+                .map(|(&t, &i)| (t, f64::from(vals[i as usize])))
+                .collect();
+            for (k, st) in scratch.profile().iter().enumerate() {
+                type Side<'s> = Vec<&'s (f64, f64)>;
+                let (a, b): (Side, Side) = gathered.iter().partition(|(t, _)| *t < st.offset);
+                let direct = if a.is_empty() || b.is_empty() {
+                    0.0
+                } else {
+                    let all: Vec<f64> = gathered.iter().map(|x| x.1).collect();
+                    let n = all.len() as f64;
+                    let mu = all.iter().sum::<f64>() / n;
+                    let vt = all.iter().map(|x| (x - mu).powi(2)).sum::<f64>() / n;
+                    let m1 = a.iter().map(|x| x.1).sum::<f64>() / a.len() as f64;
+                    let m2 = b.iter().map(|x| x.1).sum::<f64>() / b.len() as f64;
+                    let vb = (a.len() as f64 * (m1 - mu).powi(2)
+                        + b.len() as f64 * (m2 - mu).powi(2))
+                        / n;
+                    vb / vt
+                };
+                let got = scratch.attribute_eta(k)[0];
+                assert!(
+                    (got - direct).abs() < 1e-7,
+                    "query {q} k {k}: {got} vs {direct}"
+                );
+                assert!((st.eta - (st.eta_point + 2.0 * got) / 3.0).abs() < 1e-12);
+            }
+        }
+        // A channel shorter than the cloud is rejected.
+        let short = AttributeSet::new(1.0, &[("x", &vals[..10], 1.0)]).unwrap();
+        assert!(matches!(
+            Searcher::new(&idx, Delta::Global(0.05), 3)
+                .unwrap()
+                .with_attributes(&short),
+            Err(SearchError::AttributeLength { .. })
+        ));
+    }
+
+    #[test]
+    fn colour_edge_found_by_attribute_alone() {
+        use crate::separability::attribute::AttributeSet;
+        // Uniform sheet (columns at even hundredths); luma steps from 0.2 to
+        // 0.8 at x = 0.31, midway between two columns.
+        let pts = sheet(0.0, 0.02);
+        let luma: Vec<f32> = pts
+            .iter()
+            .map(|p| if p.x < 0.31 { 0.2 } else { 0.8 })
+            .collect();
+        let set = AttributeSet::new(0.0, &[("luma", &luma, 1.0)]).unwrap();
+        let idx = SpatialIndex::new(&pts).unwrap();
+        let s = Searcher::new(&idx, Delta::Global(0.02), 29)
+            .unwrap()
+            .with_attributes(&set)
+            .unwrap();
+        let mut scratch = SearchScratch::new();
+        let out = s
+            .search(
+                &Cuboid::new(Vec3::x() * 0.01, Vec3::x(), 0.1, 0.1, 0.9),
+                &mut scratch,
+            )
+            .unwrap();
+        let best = out.best.unwrap();
+        // Boundaries at 0.01 − 0.45 + 0.03(k+1): the edge 0.31 is boundary 24, offset 0.30.
+        assert_eq!(best.boundary, 24, "{best:?}");
+        assert!((best.offset - 0.3).abs() < 1e-9, "{best:?}");
+        assert!(best.eta > 0.99, "{best:?}");
     }
 
     /// Dyadic coordinates keep offsets bit-exact under translation by
