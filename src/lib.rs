@@ -24,6 +24,7 @@
 //! | [`spline`] | the closed cubic B-spline surface (Eq. 10), its least-squares fit and growth |
 //! | [`bag`] | rosbag2 bags: MCAP and sqlite3 reading, MCAP writing with ROS 2 schemas |
 //! | [`wire`] | ROS 2 messages, CDR codec, RIHS01 type hashes, PointCloud2 ↔ points |
+//! | [`pipeline`] | the frame pipeline: per-stream trackers, warm start with motion compensation, outputs, replay engine |
 //!
 //! Every module's own documentation cites the paper's equations it implements.
 #![cfg_attr(test, allow(clippy::unwrap_used))]
@@ -38,6 +39,7 @@ pub mod membrane;
 pub mod mesh;
 pub mod metrics;
 pub mod node;
+pub mod pipeline;
 pub mod separability;
 pub mod shapes;
 pub mod spline;

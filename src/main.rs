@@ -32,6 +32,29 @@ enum Command {
         #[arg(long)]
         annotated: bool,
     },
+    /// Run the frame pipeline over every PointCloud2 of a rosbag2 bag (MCAP or
+    /// db3), deterministically and as fast as possible; print a per-frame table
+    /// and a latency summary, and optionally write meshes, markers and
+    /// diagnostics to an output bag.
+    Replay {
+        /// Input bag: a `.mcap` file, a `.db3` file or a bag directory.
+        bag: PathBuf,
+        /// Output bag (`.mcap` file, or a directory with metadata.yaml).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Only replay these topics (repeatable; default: every PointCloud2 topic).
+        #[arg(long)]
+        topic: Vec<String>,
+        /// Configuration file (.json5 or .toml) holding the keys to change.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Override one parameter: section.key=value (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Print only the summary.
+        #[arg(short, long)]
+        quiet: bool,
+    },
 }
 
 fn main() -> Result<()> {
@@ -46,5 +69,16 @@ fn main() -> Result<()> {
             set,
             annotated,
         } => commands::config::run(config.as_deref(), &set, annotated),
+        Command::Replay {
+            bag,
+            out,
+            topic,
+            config,
+            set,
+            quiet,
+        } => {
+            let cfg = sepmem::config::Config::load(config.as_deref(), &set)?;
+            commands::replay::run(&bag, out.as_deref(), &topic, &cfg, quiet)
+        }
     }
 }

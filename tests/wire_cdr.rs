@@ -195,6 +195,48 @@ fn frame_diagnostics() -> FrameDiagnostics {
     }
 }
 
+fn ground_truth() -> GroundTruth {
+    GroundTruth {
+        header: header(7, 8, "camera"),
+        stream_id: "/synth/points#2".into(),
+        mesh_id: "torus".into(),
+        pose: Pose {
+            position: Point {
+                x: 0.1,
+                y: -0.2,
+                z: 1.5,
+            },
+            orientation: Quaternion {
+                x: 0.0,
+                y: 0.0,
+                z: 0.6,
+                w: 0.8,
+            },
+        },
+        visible_points: 1234,
+        vertices: vec![
+            Point {
+                x: 0.5,
+                y: 0.0,
+                z: 0.0,
+            },
+            Point {
+                x: 0.0,
+                y: 0.5,
+                z: 0.0,
+            },
+            Point {
+                x: 0.0,
+                y: 0.0,
+                z: 0.5,
+            },
+        ],
+        triangles: vec![MeshTriangle {
+            vertex_indices: [0, 2, 1],
+        }],
+    }
+}
+
 fn check<M: RosMessage + PartialEq + std::fmt::Debug>(name: &str, msg: &M) {
     let want = fixture(name);
     let got = encode(msg).unwrap();
@@ -227,6 +269,7 @@ fn encodings_match_rosbags_byte_for_byte() {
     check("mesh.cdr", &mesh());
     check("surface_mesh.cdr", &surface_mesh());
     check("frame_diagnostics.cdr", &frame_diagnostics());
+    check("ground_truth.cdr", &ground_truth());
 }
 
 #[test]

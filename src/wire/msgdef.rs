@@ -104,6 +104,10 @@ const DEFINITIONS: &[(&str, &str)] = &[
         "sepmem_msgs/msg/FrameDiagnostics",
         include_str!("../../msg/msg/FrameDiagnostics.msg"),
     ),
+    (
+        "sepmem_msgs/msg/GroundTruth",
+        include_str!("../../msg/msg/GroundTruth.msg"),
+    ),
 ];
 
 /// Names of every type in the registry, in registry order.

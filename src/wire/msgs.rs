@@ -507,6 +507,31 @@ ros_message!(
     "diagnostic_msgs/msg/DiagnosticArray",
     "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e"
 );
+/// sepmem_msgs/msg/GroundTruth (see `msg/msg/GroundTruth.msg`): written by
+/// `sepmem synth` so that replayed frames can be scored.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct GroundTruth {
+    /// Stamp and frame of the cloud this truth belongs to.
+    pub header: Header,
+    /// Stream the object appears in.
+    pub stream_id: String,
+    /// Ground-truth mesh identifier.
+    pub mesh_id: String,
+    /// Pose of the mesh frame in `header.frame_id`.
+    pub pose: Pose,
+    /// Points of the frame on this object (before outliers).
+    pub visible_points: u32,
+    /// Mesh vertices in the mesh frame (first frame of a stream only).
+    pub vertices: Vec<Point>,
+    /// Mesh triangles (first frame of a stream only).
+    pub triangles: Vec<MeshTriangle>,
+}
+
+ros_message!(
+    GroundTruth,
+    "sepmem_msgs/msg/GroundTruth",
+    "RIHS01_f14a8767c3383d4687c3d94bf348a31a468c814d74d50dca55b9e232749d0244"
+);
 ros_message!(
     SurfaceMesh,
     "sepmem_msgs/msg/SurfaceMesh",
@@ -542,6 +567,7 @@ pub const TYPE_HASHES: &[(&str, &str)] = &[
     (DiagnosticArray::TYPE_NAME, DiagnosticArray::TYPE_HASH),
     (SurfaceMesh::TYPE_NAME, SurfaceMesh::TYPE_HASH),
     (FrameDiagnostics::TYPE_NAME, FrameDiagnostics::TYPE_HASH),
+    (GroundTruth::TYPE_NAME, GroundTruth::TYPE_HASH),
 ];
 
 /// The hard-coded RIHS01 hash of a registered type.

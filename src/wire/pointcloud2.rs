@@ -117,6 +117,8 @@ pub enum PointCloud2Error {
 /// A decoded cloud and what was dropped from it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DecodedCloud {
+    /// Stamp and frame of the message.
+    pub header: Header,
     /// The finite points and their channels.
     pub cloud: PointCloud,
     /// `width · height` of the message.
@@ -360,6 +362,7 @@ pub fn decode_pointcloud2(
         .map(|(name, values)| Attribute { name, values })
         .collect();
     Ok(DecodedCloud {
+        header: msg.header.clone(),
         cloud: PointCloud { points, attributes },
         points_in: n,
         dropped_non_finite: dropped,

@@ -22,7 +22,7 @@ OUT = ROOT / 'tests' / 'data' / 'cdr'
 
 ts = get_typestore(Stores.ROS2_JAZZY)
 own = {}
-for name in ('SurfaceMesh', 'FrameDiagnostics'):
+for name in ('SurfaceMesh', 'FrameDiagnostics', 'GroundTruth'):
     text = (ROOT / 'msg' / 'msg' / f'{name}.msg').read_text()
     own.update(get_types_from_msg(text, f'sepmem_msgs/msg/{name}'))
 ts.register(own)
@@ -49,6 +49,7 @@ DiagnosticStatus = T['diagnostic_msgs/msg/DiagnosticStatus']
 DiagnosticArray = T['diagnostic_msgs/msg/DiagnosticArray']
 SurfaceMesh = T['sepmem_msgs/msg/SurfaceMesh']
 FrameDiagnostics = T['sepmem_msgs/msg/FrameDiagnostics']
+GroundTruth = T['sepmem_msgs/msg/GroundTruth']
 
 u8 = lambda xs: np.array(xs, dtype=np.uint8)  # noqa: E731
 
@@ -142,6 +143,16 @@ def frame_diagnostics():
                             warm_start=False, start_reason='first_frame', stop_reason='iteration_cap')
 
 
+def ground_truth():
+    return GroundTruth(header=header(7, 8, 'camera'), stream_id='/synth/points#2', mesh_id='torus',
+                       pose=Pose(position=Point(x=0.1, y=-0.2, z=1.5),
+                                 orientation=Quaternion(x=0.0, y=0.0, z=0.6, w=0.8)),
+                       visible_points=1234,
+                       vertices=[Point(x=0.5, y=0.0, z=0.0), Point(x=0.0, y=0.5, z=0.0),
+                                 Point(x=0.0, y=0.0, z=0.5)],
+                       triangles=[MeshTriangle(vertex_indices=np.array([0, 2, 1], dtype=np.uint32))])
+
+
 def main():
     OUT.mkdir(parents=True, exist_ok=True)
     samples = [
@@ -153,6 +164,7 @@ def main():
         ('mesh', mesh(), True),
         ('surface_mesh', surface_mesh(), True),
         ('frame_diagnostics', frame_diagnostics(), True),
+        ('ground_truth', ground_truth(), True),
     ]
     for name, msg, le in samples:
         data = bytes(ts.serialize_cdr(msg, msg.__msgtype__, little_endian=le))
@@ -169,7 +181,8 @@ def main():
         'visualization_msgs/msg/UVCoordinate', 'visualization_msgs/msg/MeshFile',
         'shape_msgs/msg/Mesh', 'shape_msgs/msg/MeshTriangle', 'diagnostic_msgs/msg/KeyValue',
         'diagnostic_msgs/msg/DiagnosticStatus', 'diagnostic_msgs/msg/DiagnosticArray',
-        'sepmem_msgs/msg/SurfaceMesh', 'sepmem_msgs/msg/FrameDiagnostics'})
+        'sepmem_msgs/msg/SurfaceMesh', 'sepmem_msgs/msg/FrameDiagnostics',
+        'sepmem_msgs/msg/GroundTruth'})
     table = {t: {'rihs01': ts.hash_rihs01(t), 'msgdef': ts.generate_msgdef(t, ros_version=2)[0]}
              for t in types}
     (OUT / 'rosbags_types.json').write_text(json.dumps(table, indent=1, sort_keys=True) + '\n')

@@ -1,0 +1,465 @@
+//! The transport-agnostic frame pipeline: one tracker per object stream,
+//! warm-started frame to frame under a per-frame budget.
+//!
+//! For every frame of a stream the [`Tracker`]:
+//! 1. validates the decoded cloud (too few points → skipped, counted);
+//! 2. decides the start path: **warm** from the previous frame's surface when
+//!    there is one and the object did not jump or change size beyond the
+//!    configured bounds, **cold** (the paper's six-extreme-point octagon,
+//!    §III-E) otherwise;
+//! 3. for a warm start, compensates the motion: centroid shift, then a few
+//!    rigid ICP steps of the previous surface onto the new points
+//!    ([`align`]);
+//! 4. evolves the membrane (paper §III-D/E steps 2–5) under the frame's
+//!    budget: an iteration cap (small for warm frames) and a wall-clock
+//!    deadline shared by all attempts of the frame;
+//! 5. falls back to a cold start within the same deadline when the warm
+//!    result's global separability η_g fell below a fraction of the previous
+//!    frame's (the warm start "failed"), and reports which path it took and why.
+//!
+//! Streams never share state, so an error in one cannot affect another.
+
+pub mod align;
+pub mod engine;
+pub mod outputs;
+
+use crate::cloud::{PointCloud, Vec3};
+use crate::membrane::{self, Budget, MembraneConfig, MembraneError, Reconstruction, WarmStart};
+use crate::spline::ClosedSurface;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::time::{Duration, Instant};
+use thiserror::Error;
+
+/// Parameters of the frame pipeline (`pipeline` section of the config).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PipelineConfig {
+    /// Split each cloud into one stream per value of `label_channel` when present.
+    pub split_by_label: bool,
+    /// Name of the per-point segment-label field.
+    pub label_channel: String,
+    /// Label values that are not objects (background, table…).
+    pub ignore_labels: Vec<i64>,
+    /// Frames (or label segments) with fewer points are skipped and counted.
+    pub min_points: usize,
+    /// Start each frame from the previous frame's surface when possible.
+    pub warm_start: bool,
+    /// Iteration cap for a warm-started frame.
+    pub warm_max_iterations: usize,
+    /// Iteration cap for a cold frame (0: the membrane's own `max_iterations`).
+    pub cold_max_iterations: usize,
+    /// Wall-clock budget per frame in ms, shared by all attempts (0: none).
+    pub deadline_ms: f64,
+    /// Cold start when the centroid moved more than this fraction of the object size.
+    pub max_motion: f64,
+    /// Cold start when the object size changed by more than this fraction.
+    pub max_size_change: f64,
+    /// Redo a warm frame cold when its η_g is below this fraction of the previous η_g.
+    pub warm_eta_ratio: f64,
+    /// Rigid ICP steps of the previous surface onto the new points (0: centroid shift only).
+    pub icp_steps: usize,
+    /// ICP match trimming radius, as a fraction of the object size.
+    pub icp_trim: f64,
+    /// At most this many new points per ICP step.
+    pub icp_max_points: usize,
+    /// Output topic of sepmem's stamped mesh (`sepmem_msgs/msg/SurfaceMesh`).
+    pub mesh_topic: String,
+    /// Output topic of the RViz/Foxglove markers (`visualization_msgs/msg/MarkerArray`).
+    pub markers_topic: String,
+    /// Output topic of the per-frame diagnostics (`sepmem_msgs/msg/FrameDiagnostics`).
+    pub frame_diagnostics_topic: String,
+    /// Marker namespace.
+    pub marker_namespace: String,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> Self {
+        Self {
+            split_by_label: true,
+            label_channel: "label".into(),
+            ignore_labels: Vec::new(),
+            min_points: 50,
+            warm_start: true,
+            warm_max_iterations: 6,
+            cold_max_iterations: 0,
+            deadline_ms: 40.0,
+            max_motion: 0.5,
+            max_size_change: 0.5,
+            warm_eta_ratio: 0.8,
+            icp_steps: 5,
+            icp_trim: 0.1,
+            icp_max_points: 1000,
+            mesh_topic: "/sepmem/mesh".into(),
+            markers_topic: "/sepmem/markers".into(),
+            frame_diagnostics_topic: "/sepmem/frame_diagnostics".into(),
+            marker_namespace: "sepmem".into(),
+        }
+    }
+}
+
+/// Errors of one frame of one stream.
+#[derive(Debug, Error)]
+pub enum PipelineError {
+    /// The frame had too few finite points for a surface.
+    #[error("stream {stream}: {points} points, at least {min} needed; frame skipped")]
+    TooFewPoints {
+        /// Stream key.
+        stream: String,
+        /// Points present.
+        points: usize,
+        /// Minimum.
+        min: usize,
+    },
+    /// The membrane failed on this frame.
+    #[error("stream {stream}: {source}")]
+    Membrane {
+        /// Stream key.
+        stream: String,
+        /// Cause.
+        source: MembraneError,
+    },
+}
+
+/// Identity of an object stream: a topic, and a segment label when the
+/// topic's clouds carry several labelled objects.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub struct StreamKey {
+    /// Topic name (ROS style, e.g. `/seg/points`).
+    pub topic: String,
+    /// Segment label, if the stream is one label of a labelled cloud.
+    pub label: Option<i64>,
+}
+
+impl StreamKey {
+    /// A stream for a whole topic.
+    pub fn topic(topic: impl Into<String>) -> Self {
+        Self {
+            topic: topic.into(),
+            label: None,
+        }
+    }
+}
+
+impl fmt::Display for StreamKey {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.label {
+            Some(l) => write!(f, "{}#{l}", self.topic),
+            None => f.write_str(&self.topic),
+        }
+    }
+}
+
+/// Which start a frame took.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StartPath {
+    /// From the previous frame's surface.
+    Warm,
+    /// From the six extreme points.
+    Cold,
+}
+
+/// Why a frame took its path.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case", tag = "reason")]
+pub enum PathReason {
+    /// Previous surface available and the object moved within bounds.
+    Tracked,
+    /// First frame of the stream (or after a reset).
+    FirstFrame,
+    /// Warm start disabled by configuration.
+    WarmDisabled,
+    /// The centroid jumped by more than `max_motion` (value: fraction of size).
+    Moved {
+        /// Jump as a fraction of the object size.
+        fraction: f64,
+    },
+    /// The object size changed by more than `max_size_change`.
+    Resized {
+        /// Relative size change.
+        fraction: f64,
+    },
+    /// The warm result's η_g fell below `warm_eta_ratio` × the previous η_g; redone cold.
+    WarmFailed {
+        /// η_g of the failed warm attempt.
+        eta: f64,
+        /// η_g of the previous frame.
+        previous: f64,
+    },
+}
+
+impl fmt::Display for PathReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Tracked => f.write_str("tracked"),
+            Self::FirstFrame => f.write_str("first_frame"),
+            Self::WarmDisabled => f.write_str("warm_disabled"),
+            Self::Moved { fraction } => write!(f, "moved({fraction:.2})"),
+            Self::Resized { fraction } => write!(f, "resized({fraction:.2})"),
+            Self::WarmFailed { eta, previous } => write!(f, "warm_failed({eta:.3}<{previous:.3})"),
+        }
+    }
+}
+
+/// The outcome of one frame of one stream.
+#[derive(Debug, Clone)]
+pub struct FrameResult {
+    /// Stream.
+    pub stream: StreamKey,
+    /// Index of this frame in the stream (0-based, counting skipped frames).
+    pub frame: u64,
+    /// Path taken.
+    pub path: StartPath,
+    /// Why.
+    pub reason: PathReason,
+    /// Iterations of all attempts of this frame (warm + fallback).
+    pub iterations: usize,
+    /// The reconstruction (mesh, surface, membrane report).
+    pub reconstruction: Reconstruction,
+    /// Rigid motion applied to the previous surface (warm frames).
+    pub motion: Option<align::Rigid>,
+    /// Wall-clock time of the frame in ms.
+    pub latency_ms: f64,
+}
+
+/// Running counts of a stream.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct StreamStats {
+    /// Frames seen.
+    pub frames: u64,
+    /// Frames that produced a mesh from a warm start.
+    pub warm: u64,
+    /// Frames that produced a mesh from a cold start.
+    pub cold: u64,
+    /// Warm attempts redone cold.
+    pub fallbacks: u64,
+    /// Frames skipped or failed.
+    pub errors: u64,
+}
+
+#[derive(Debug, Clone)]
+struct Previous {
+    surface: ClosedSurface,
+    vertices: Vec<Vec3>,
+    centroid: Vec3,
+    size: f64,
+    eta: f64,
+}
+
+/// Per-stream state: the previous surface for warm starts, and counts.
+#[derive(Debug, Clone)]
+pub struct Tracker {
+    key: StreamKey,
+    previous: Option<Previous>,
+    stats: StreamStats,
+}
+
+impl Tracker {
+    /// A tracker with no history.
+    pub fn new(key: StreamKey) -> Self {
+        Self {
+            key,
+            previous: None,
+            stats: StreamStats::default(),
+        }
+    }
+
+    /// The stream this tracker follows.
+    pub fn key(&self) -> &StreamKey {
+        &self.key
+    }
+
+    /// Running counts.
+    pub fn stats(&self) -> StreamStats {
+        self.stats
+    }
+
+    /// Forget the previous surface: the next frame starts cold.
+    pub fn reset(&mut self) {
+        self.previous = None;
+    }
+
+    /// Process one frame: decide the path, evolve under the budget, remember
+    /// the result for the next frame.
+    ///
+    /// # Errors
+    /// [`PipelineError`] when the frame is unusable; the tracker's history is
+    /// kept, so the next good frame can still warm-start.
+    pub fn process(
+        &mut self,
+        cloud: &PointCloud,
+        membrane: &MembraneConfig,
+        cfg: &PipelineConfig,
+    ) -> Result<FrameResult, PipelineError> {
+        let start = Instant::now();
+        let frame = self.stats.frames;
+        self.stats.frames += 1;
+        let result = self.process_inner(cloud, membrane, cfg, start, frame);
+        match &result {
+            Ok(r) => match r.path {
+                StartPath::Warm => self.stats.warm += 1,
+                StartPath::Cold => self.stats.cold += 1,
+            },
+            Err(_) => self.stats.errors += 1,
+        }
+        result
+    }
+
+    fn process_inner(
+        &mut self,
+        cloud: &PointCloud,
+        membrane_cfg: &MembraneConfig,
+        cfg: &PipelineConfig,
+        start: Instant,
+        frame: u64,
+    ) -> Result<FrameResult, PipelineError> {
+        let finite = cloud
+            .points
+            .iter()
+            .filter(|p| p.iter().all(|c| c.is_finite()))
+            .count();
+        if finite < cfg.min_points.max(4) {
+            return Err(PipelineError::TooFewPoints {
+                stream: self.key.to_string(),
+                points: finite,
+                min: cfg.min_points.max(4),
+            });
+        }
+        let deadline =
+            (cfg.deadline_ms > 0.0).then(|| start + Duration::from_secs_f64(cfg.deadline_ms / 1e3));
+        let centroid = cloud.centroid().unwrap_or_else(Vec3::zeros);
+        let size = cloud.aabb().longest_edge();
+
+        let (path, mut reason, warm, motion) = self.choose_path(cloud, centroid, size, cfg);
+        let cap = match path {
+            StartPath::Warm => cfg.warm_max_iterations.max(1),
+            StartPath::Cold => cold_cap(membrane_cfg, cfg),
+        };
+        let budget = Budget {
+            max_iterations: Some(cap),
+            deadline,
+        };
+        let membrane_err = |source| PipelineError::Membrane {
+            stream: self.key.to_string(),
+            source,
+        };
+        let mut rec = membrane::reconstruct(cloud, membrane_cfg, &budget, warm.as_ref())
+            .map_err(membrane_err)?;
+        let mut iterations = rec.report.iterations;
+        let mut final_path = path;
+
+        if path == StartPath::Warm {
+            if let Some(prev) = &self.previous {
+                let eta = rec.report.eta_final;
+                if eta < cfg.warm_eta_ratio * prev.eta {
+                    self.stats.fallbacks += 1;
+                    let budget = Budget {
+                        max_iterations: Some(cold_cap(membrane_cfg, cfg)),
+                        deadline,
+                    };
+                    let cold = membrane::reconstruct(cloud, membrane_cfg, &budget, None)
+                        .map_err(membrane_err)?;
+                    iterations += cold.report.iterations;
+                    reason = PathReason::WarmFailed {
+                        eta,
+                        previous: prev.eta,
+                    };
+                    final_path = StartPath::Cold;
+                    if cold.report.eta_final >= eta {
+                        rec = cold;
+                    }
+                }
+            }
+        }
+
+        self.previous = Some(Previous {
+            surface: rec.surface.clone(),
+            vertices: rec.mesh.vertices.clone(),
+            centroid,
+            size,
+            eta: rec.report.eta_final,
+        });
+        Ok(FrameResult {
+            stream: self.key.clone(),
+            frame,
+            path: final_path,
+            reason,
+            iterations,
+            reconstruction: rec,
+            motion,
+            latency_ms: start.elapsed().as_secs_f64() * 1e3,
+        })
+    }
+
+    fn choose_path(
+        &self,
+        cloud: &PointCloud,
+        centroid: Vec3,
+        size: f64,
+        cfg: &PipelineConfig,
+    ) -> (
+        StartPath,
+        PathReason,
+        Option<WarmStart>,
+        Option<align::Rigid>,
+    ) {
+        let cold = |reason| (StartPath::Cold, reason, None, None);
+        if !cfg.warm_start {
+            return cold(PathReason::WarmDisabled);
+        }
+        let Some(prev) = &self.previous else {
+            return cold(PathReason::FirstFrame);
+        };
+        let scale = prev.size.max(size).max(f64::MIN_POSITIVE);
+        let moved = (centroid - prev.centroid).norm() / scale;
+        if moved > cfg.max_motion {
+            return cold(PathReason::Moved { fraction: moved });
+        }
+        let resized = (size - prev.size).abs() / scale;
+        if resized > cfg.max_size_change {
+            return cold(PathReason::Resized { fraction: resized });
+        }
+        let shift = align::Rigid::translation(
+            centroid.x - prev.centroid.x,
+            centroid.y - prev.centroid.y,
+            centroid.z - prev.centroid.z,
+        );
+        let motion = if cfg.icp_steps > 0 {
+            align::align(
+                &prev.vertices,
+                &cloud.points,
+                shift,
+                cfg.icp_steps,
+                cfg.icp_trim * scale,
+                cfg.icp_max_points,
+            )
+            .motion
+        } else {
+            shift
+        };
+        let net: Vec<Vec3> = prev
+            .surface
+            .net()
+            .iter()
+            .map(|p| motion.transform_point(&(*p).into()).coords)
+            .collect();
+        match ClosedSurface::from_net(prev.surface.m(), prev.surface.l(), net) {
+            Ok(surface) => (
+                StartPath::Warm,
+                PathReason::Tracked,
+                Some(WarmStart { surface }),
+                Some(motion),
+            ),
+            Err(_) => cold(PathReason::FirstFrame),
+        }
+    }
+}
+
+fn cold_cap(membrane: &MembraneConfig, cfg: &PipelineConfig) -> usize {
+    if cfg.cold_max_iterations == 0 {
+        membrane.max_iterations.max(1)
+    } else {
+        cfg.cold_max_iterations
+    }
+}
