@@ -153,7 +153,7 @@ impl Default for MembraneConfig {
             median_filter: true,
             inward_force: true,
             inward_voxel_delta: 2.0,
-            inward_min_points: 11,
+            inward_min_points: 20,
             inward_step: 0.5,
             roughness: 1e-2,
             g_min: 0.01,

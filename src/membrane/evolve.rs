@@ -507,8 +507,10 @@ pub(crate) fn run(
         }
         times.search_ms += ms(t_search);
         let t_fit = Instant::now();
+        // The orientation sign is fixed once (init, warm start, regrid):
+        // a refit moves the samples by small shifts and cannot turn the
+        // surface inside out.
         fit.fit(&mut surface, &targets)?;
-        surface.fix_orientation();
         times.fit_ms += ms(t_fit);
         grids.push([m, l]);
         let prev = eta_hist.last().copied();
