@@ -64,9 +64,13 @@ pub struct SpatialIndex {
 }
 
 impl SpatialIndex {
-    /// Build with an automatic cell size: about two surface-sample spacings
-    /// (`2·L/√N` for the longest bounding-box edge `L`), enlarged if needed
-    /// so the grid has at most `8·N` cells.
+    /// Build with an automatic cell size: about four surface-sample spacings
+    /// (`6·L/√N` for the longest bounding-box edge `L`; a surface cloud has
+    /// a spacing of about `1.5·L/√N`), enlarged if needed so the grid has
+    /// at most `8·N` cells. Measured on a 20k-point sphere with ~60-point
+    /// cuboids, cells of a few spacings beat finer ones (fewer empty cells
+    /// to visit); pass the typical cross-section via
+    /// [`Self::with_cell_size`] when it is known.
     ///
     /// Non-finite points are left out (counted in [`Self::skipped`]).
     ///
@@ -124,7 +128,7 @@ impl SpatialIndex {
         let longest = extent.max();
         let mut h = match cell {
             Some(h) => h,
-            None if longest > 0.0 => 2.0 * longest / (n as f64).sqrt(),
+            None if longest > 0.0 => 6.0 * longest / (n as f64).sqrt(),
             None => 1.0,
         };
         let budget = (CELLS_PER_POINT * n).max(MIN_CELL_BUDGET);

@@ -4,11 +4,13 @@
 //!   counts (paper Eqs. 4, 7, 8);
 //! * [`attribute`]: attribute separability (Fisher ratio, Eq. 1) and the
 //!   weighted separability (Eq. 9);
+//! * [`filter`]: the 3D separability filter, a separability map of a cloud (§IV-A);
 //! * [`grid`]: the spatial index that gathers the points of a search cuboid;
 //! * [`search`]: the oriented search primitive: the separability profile
 //!   over K boundary positions along a direction, and its argmax.
 
 pub mod attribute;
+pub mod filter;
 pub mod grid;
 pub mod point;
 pub mod search;
@@ -16,6 +18,7 @@ pub mod search;
 pub use attribute::{
     AttributeChannel, AttributeError, AttributeSet, AttributeWeights, ChannelWeight,
 };
+pub use filter::{separability_map, FilterDirection, FilterSize};
 pub use grid::{GridError, OrientedBox, SpatialIndex};
 pub use point::{eta_from_counts, non_data_count, point_separability, PointSeparability};
 pub use search::{

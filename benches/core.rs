@@ -1,0 +1,95 @@
+//! Benchmarks of the measuring core (issue 2): the oriented search primitive
+//! (paper Eq. 7 over K boundaries) on a 20,000-point cloud at a typical
+//! cuboid (~60 points gathered, K = 30), and the k-NN density (paper Eq. 5)
+//! of 20,000 points, both single-threaded.
+#![allow(missing_docs, clippy::unwrap_used)]
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use sepmem::density::Density;
+use sepmem::separability::{Cuboid, Delta, SearchScratch, Searcher, SpatialIndex};
+use sepmem::Vec3;
+use std::hint::black_box;
+
+/// 20,000 points uniformly on a sphere of diameter 1 (spacing ≈ 0.0125).
+fn sphere_cloud(n: usize) -> Vec<Vec3> {
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    (0..n)
+        .map(|_| loop {
+            let v = Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            );
+            let l = v.norm();
+            if l > 0.1 && l <= 1.0 {
+                break v / l * 0.5;
+            }
+        })
+        .collect()
+}
+
+fn bench_search(c: &mut Criterion) {
+    let pts = sphere_cloud(20_000);
+    let delta = Density::new(&pts, 8).unwrap().median();
+    let index = SpatialIndex::new(&pts).unwrap();
+    let searcher = Searcher::new(&index, Delta::Global(delta), 30).unwrap();
+    // Cuboids centred on the surface along the normal: cross-section 0.095²
+    // holds ~60 points of the shell; depth 0.12.
+    let cuboids: Vec<Cuboid> = (0..256)
+        .map(|i| {
+            let n = pts[i * 61].normalize();
+            Cuboid::new(n * 0.5, n, 0.095, 0.095, 0.12)
+        })
+        .collect();
+    let mut scratch = SearchScratch::new();
+    let mean_gathered = cuboids
+        .iter()
+        .map(|cb| searcher.search(cb, &mut scratch).unwrap().gathered)
+        .sum::<usize>() as f64
+        / cuboids.len() as f64;
+    eprintln!("search bench: delta = {delta:.5}, mean gathered = {mean_gathered:.1}, K = 30");
+    let mut i = 0;
+    c.bench_function("oriented_search_20k_K30", |b| {
+        b.iter(|| {
+            i = (i + 1) % cuboids.len();
+            black_box(
+                searcher
+                    .search(black_box(&cuboids[i]), &mut scratch)
+                    .unwrap(),
+            )
+        })
+    });
+    for cell in [0.02, 0.06] {
+        let index = SpatialIndex::with_cell_size(&pts, cell).unwrap();
+        let searcher = Searcher::new(&index, Delta::Global(delta), 30).unwrap();
+        c.bench_function(&format!("oriented_search_20k_K30_cell{cell}"), |b| {
+            b.iter(|| {
+                i = (i + 1) % cuboids.len();
+                black_box(
+                    searcher
+                        .search(black_box(&cuboids[i]), &mut scratch)
+                        .unwrap(),
+                )
+            })
+        });
+    }
+}
+
+fn bench_density(c: &mut Criterion) {
+    let pts = sphere_cloud(20_000);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let mut g = c.benchmark_group("density");
+    g.sample_size(20);
+    g.bench_function("knn8_density_20k_single_thread", |b| {
+        b.iter(|| pool.install(|| black_box(Density::new(black_box(&pts), 8).unwrap())))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench_search, bench_density);
+criterion_main!(benches);
