@@ -15,6 +15,8 @@
 //! | [`error`] | the crate-level error type |
 //! | [`node`] | the live node: per-stream keep-latest slots, rayon compute, diagnostics, eviction, sharding |
 //! | [`transport`] | ROS 2 wire compatibility over zenoh: rmw_zenoh keys, attachments, liveliness tokens; sessions |
+//! | [`synth`] | depth-camera simulation of moving meshes (visible side, noise, outliers, labels) |
+//! | [`io`] | PLY / PCD / XYZ / OBJ readers, PLY / OBJ / PCD writers |
 //! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
 //! | [`metrics`] | Chamfer, F-score and normal consistency (ONet/SAP protocol), surface sampling |
 //! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
@@ -35,6 +37,7 @@ pub mod cloud;
 pub mod config;
 pub mod density;
 pub mod error;
+pub mod io;
 pub mod membrane;
 pub mod mesh;
 pub mod metrics;
@@ -44,6 +47,7 @@ pub mod separability;
 pub mod shapes;
 pub mod spline;
 pub mod transport;
+pub mod synth;
 pub mod wire;
 
 pub use cloud::{Aabb, Attribute, PointCloud, Vec3};

@@ -55,6 +55,10 @@ enum Command {
         #[arg(short, long)]
         quiet: bool,
     },
+    /// Write a synthetic depth-camera sequence of moving objects (procedural
+    /// shapes or mesh files) as a rosbag2 MCAP bag, with per-frame ground
+    /// truth on /synth/ground_truth.
+    Synth(commands::synth::SynthArgs),
 }
 
 fn main() -> Result<()> {
@@ -80,5 +84,6 @@ fn main() -> Result<()> {
             let cfg = sepmem::config::Config::load(config.as_deref(), &set)?;
             commands::replay::run(&bag, out.as_deref(), &topic, &cfg, quiet)
         }
+        Command::Synth(args) => commands::synth::run(&args),
     }
 }

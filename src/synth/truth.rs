@@ -1,0 +1,308 @@
+//! Ground truth read back from a bag: the `sepmem_msgs/msg/GroundTruth`
+//! side channel written by [`crate::synth::sequence`], indexed by stream id
+//! (`topic` or `topic#label`, the [`StreamKey`](crate::pipeline::StreamKey)
+//! display string) and stamp, so that every replayed frame can be scored.
+//!
+//! A stream's first message carries the mesh in the object frame; every
+//! message carries the object's pose in the cloud's frame at that stamp. The
+//! posed ground-truth surface of a frame is the mesh transformed by that
+//! frame's pose; it is the full closed surface, including the side the
+//! camera does not see.
+
+use std::collections::BTreeMap;
+
+use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion};
+use thiserror::Error;
+
+use crate::bag::{Bag, BagError};
+use crate::cloud::Vec3;
+use crate::mesh::TriMesh;
+use crate::wire::msgs::{GroundTruth, Pose};
+use crate::wire::{self, RosMessage, WireError};
+
+/// Errors of reading ground truth.
+#[derive(Debug, Error)]
+pub enum TruthError {
+    /// The bag could not be read.
+    #[error("reading ground truth from the bag: {0}")]
+    Bag(#[from] BagError),
+    /// A GroundTruth message did not decode.
+    #[error("ground-truth message at {stamp_ns} ns does not decode: {source}")]
+    Decode {
+        /// Log time of the message.
+        stamp_ns: u64,
+        /// Cause.
+        source: WireError,
+    },
+    /// A stream's first message carries no mesh.
+    #[error("stream `{stream}`: first ground-truth message (stamp {stamp_ns} ns) has no mesh")]
+    MissingMesh {
+        /// Stream id.
+        stream: String,
+        /// Stamp of that message.
+        stamp_ns: i64,
+    },
+    /// A mesh is malformed.
+    #[error("stream `{stream}`: bad ground-truth mesh: {reason}")]
+    BadMesh {
+        /// Stream id.
+        stream: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A pose is not finite or its quaternion is not of unit length.
+    #[error("stream `{stream}` at {stamp_ns} ns: bad pose {pose:?}")]
+    BadPose {
+        /// Stream id.
+        stream: String,
+        /// Stamp.
+        stamp_ns: i64,
+        /// The pose as received.
+        pose: Pose,
+    },
+}
+
+/// Ground truth of one object in one frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TruthFrame {
+    /// Object frame → cloud frame.
+    pub pose: Isometry3<f64>,
+    /// Points of the frame on the object (before outliers).
+    pub visible_points: u32,
+}
+
+/// Ground truth of one stream.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TruthTrack {
+    /// Mesh identifier (object name).
+    pub mesh_id: String,
+    /// The mesh in the object frame.
+    pub mesh: TriMesh,
+    /// Per stamp (ns since the epoch).
+    pub frames: BTreeMap<i64, TruthFrame>,
+}
+
+impl TruthTrack {
+    /// The ground-truth surface at `stamp_ns` (mesh moved by that frame's pose).
+    pub fn posed_mesh(&self, stamp_ns: i64) -> Option<TriMesh> {
+        let f = self.frames.get(&stamp_ns)?;
+        let mut m = self.mesh.clone();
+        for v in &mut m.vertices {
+            *v = (f.pose * Point3::from(*v)).coords;
+        }
+        Some(m)
+    }
+}
+
+/// All ground truth of a bag, by stream id.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GroundTruthIndex {
+    /// Tracks by stream id (`topic` or `topic#label`).
+    pub streams: BTreeMap<String, TruthTrack>,
+}
+
+fn pose_from_msg(p: &Pose) -> Option<Isometry3<f64>> {
+    let o = p.orientation;
+    let q = Quaternion::new(o.w, o.x, o.y, o.z);
+    let t = Vec3::new(p.position.x, p.position.y, p.position.z);
+    let finite = q.coords.iter().chain(t.iter()).all(|c| c.is_finite());
+    if !finite || (q.norm() - 1.0).abs() > 1e-6 {
+        return None;
+    }
+    Some(Isometry3::from_parts(
+        Translation3::from(t),
+        UnitQuaternion::from_quaternion(q),
+    ))
+}
+
+impl GroundTruthIndex {
+    /// Read every GroundTruth message of `bag` (any topic of that type); an
+    /// empty index when the bag has none.
+    ///
+    /// # Errors
+    /// [`TruthError`] for unreadable bags or malformed messages.
+    pub fn from_bag(bag: &Bag) -> Result<Self, TruthError> {
+        let topics: Vec<&str> = bag
+            .topics
+            .iter()
+            .filter(|t| t.type_name == GroundTruth::TYPE_NAME)
+            .map(|t| t.name.as_str())
+            .collect();
+        if topics.is_empty() {
+            return Ok(Self::default());
+        }
+        let mut msgs = Vec::new();
+        for m in bag.read(&topics)? {
+            let gt: GroundTruth = wire::decode(&m.data).map_err(|source| TruthError::Decode {
+                stamp_ns: m.log_time,
+                source,
+            })?;
+            msgs.push(gt);
+        }
+        Self::from_messages(msgs)
+    }
+
+    /// Index messages given in log order (the first of each stream must carry the mesh).
+    ///
+    /// # Errors
+    /// [`TruthError`] for a missing or malformed mesh or a bad pose.
+    pub fn from_messages(msgs: impl IntoIterator<Item = GroundTruth>) -> Result<Self, TruthError> {
+        let mut streams: BTreeMap<String, TruthTrack> = BTreeMap::new();
+        for gt in msgs {
+            let stamp = gt.header.stamp.to_nanos();
+            let pose = pose_from_msg(&gt.pose).ok_or_else(|| TruthError::BadPose {
+                stream: gt.stream_id.clone(),
+                stamp_ns: stamp,
+                pose: gt.pose,
+            })?;
+            if !streams.contains_key(&gt.stream_id) {
+                let mesh = mesh_from_msg(&gt)?;
+                streams.insert(
+                    gt.stream_id.clone(),
+                    TruthTrack {
+                        mesh_id: gt.mesh_id.clone(),
+                        mesh,
+                        frames: BTreeMap::new(),
+                    },
+                );
+            }
+            if let Some(track) = streams.get_mut(&gt.stream_id) {
+                track.frames.insert(
+                    stamp,
+                    TruthFrame {
+                        pose,
+                        visible_points: gt.visible_points,
+                    },
+                );
+            }
+        }
+        Ok(Self { streams })
+    }
+
+    /// The truth of `stream` at `stamp_ns`.
+    pub fn frame(&self, stream: &str, stamp_ns: i64) -> Option<&TruthFrame> {
+        self.streams.get(stream)?.frames.get(&stamp_ns)
+    }
+
+    /// The posed ground-truth surface of `stream` at `stamp_ns`.
+    pub fn posed_mesh(&self, stream: &str, stamp_ns: i64) -> Option<TriMesh> {
+        self.streams.get(stream)?.posed_mesh(stamp_ns)
+    }
+
+    /// Whether no ground truth was found.
+    pub fn is_empty(&self) -> bool {
+        self.streams.is_empty()
+    }
+}
+
+fn mesh_from_msg(gt: &GroundTruth) -> Result<TriMesh, TruthError> {
+    let bad = |reason: String| TruthError::BadMesh {
+        stream: gt.stream_id.clone(),
+        reason,
+    };
+    if gt.vertices.is_empty() || gt.triangles.is_empty() {
+        return Err(TruthError::MissingMesh {
+            stream: gt.stream_id.clone(),
+            stamp_ns: gt.header.stamp.to_nanos(),
+        });
+    }
+    let nv = gt.vertices.len();
+    if gt
+        .triangles
+        .iter()
+        .any(|t| t.vertex_indices.iter().any(|&i| i as usize >= nv))
+    {
+        return Err(bad(format!("triangle index ≥ {nv} vertices")));
+    }
+    let vertices: Vec<Vec3> = gt
+        .vertices
+        .iter()
+        .map(|p| Vec3::new(p.x, p.y, p.z))
+        .collect();
+    if vertices.iter().any(|v| !v.iter().all(|c| c.is_finite())) {
+        return Err(bad("non-finite vertex".into()));
+    }
+    Ok(TriMesh {
+        vertices,
+        triangles: gt.triangles.iter().map(|t| t.vertex_indices).collect(),
+        vertex_scalars: Vec::new(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wire::msgs::{Header, MeshTriangle, Point, Quaternion as QMsg, Time};
+
+    fn msg(stream: &str, ns: i64, with_mesh: bool, pose: Pose) -> GroundTruth {
+        let (vertices, triangles) = if with_mesh {
+            (
+                [
+                    [0.0, 0.0, 0.0],
+                    [1.0, 0.0, 0.0],
+                    [0.0, 1.0, 0.0],
+                    [0.0, 0.0, 1.0],
+                ]
+                .map(|[x, y, z]| Point { x, y, z })
+                .to_vec(),
+                [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]
+                    .map(|v| MeshTriangle { vertex_indices: v })
+                    .to_vec(),
+            )
+        } else {
+            (vec![], vec![])
+        };
+        GroundTruth {
+            header: Header {
+                stamp: Time::from_nanos(ns),
+                frame_id: "cam".into(),
+            },
+            stream_id: stream.into(),
+            mesh_id: "tet".into(),
+            pose,
+            visible_points: 10,
+            vertices,
+            triangles,
+        }
+    }
+
+    fn shifted(z: f64) -> Pose {
+        Pose {
+            position: Point { x: 0.0, y: 0.0, z },
+            orientation: QMsg::default(),
+        }
+    }
+
+    #[test]
+    fn posed_mesh_applies_each_frames_pose() {
+        let idx = GroundTruthIndex::from_messages([
+            msg("/a", 1, true, shifted(1.0)),
+            msg("/a", 2, false, shifted(2.0)),
+        ])
+        .unwrap();
+        assert_eq!(idx.posed_mesh("/a", 1).unwrap().vertices[3].z, 2.0);
+        assert_eq!(idx.posed_mesh("/a", 2).unwrap().vertices[3].z, 3.0);
+        assert!(idx.posed_mesh("/a", 3).is_none());
+        assert!(idx.posed_mesh("/b", 1).is_none());
+    }
+
+    #[test]
+    fn malformed_truth_is_a_typed_error() {
+        assert!(matches!(
+            GroundTruthIndex::from_messages([msg("/a", 1, false, shifted(1.0))]),
+            Err(TruthError::MissingMesh { .. })
+        ));
+        let mut p = shifted(1.0);
+        p.orientation.w = 2.0;
+        assert!(matches!(
+            GroundTruthIndex::from_messages([msg("/a", 1, true, p)]),
+            Err(TruthError::BadPose { .. })
+        ));
+        let mut m = msg("/a", 1, true, shifted(1.0));
+        m.triangles[0].vertex_indices[0] = 9;
+        assert!(matches!(
+            GroundTruthIndex::from_messages([m]),
+            Err(TruthError::BadMesh { .. })
+        ));
+    }
+}
