@@ -46,8 +46,8 @@ pub mod pipeline;
 pub mod separability;
 pub mod shapes;
 pub mod spline;
-pub mod transport;
 pub mod synth;
+pub mod transport;
 pub mod wire;
 
 pub use cloud::{Aabb, Attribute, PointCloud, Vec3};
