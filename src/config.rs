@@ -73,6 +73,8 @@ pub struct Config {
     pub membrane: crate::membrane::MembraneConfig,
     /// ROS 2 wire limits (PointCloud2 decoding).
     pub wire: crate::wire::pointcloud2::WireConfig,
+    /// The live node (`sepmem node`): topics, outputs, real-time bounds, sharding, transport.
+    pub node: crate::node::NodeConfig,
     /// The frame pipeline: streams, warm starts, per-frame budget, output topics.
     pub pipeline: crate::pipeline::PipelineConfig,
 }

@@ -13,6 +13,8 @@
 //! | [`mesh`] | the indexed triangle mesh produced by the membrane, with per-vertex scalars |
 //! | [`config`] | the one annotated configuration (`launch/sepmem.json5`), loading and `--set` overrides |
 //! | [`error`] | the crate-level error type |
+//! | [`node`] | the live node: per-stream keep-latest slots, rayon compute, diagnostics, eviction, sharding |
+//! | [`transport`] | ROS 2 wire compatibility over zenoh: rmw_zenoh keys, attachments, liveliness tokens; sessions |
 //! | [`synth`] | depth-camera simulation of moving meshes (visible side, noise, outliers, labels) |
 //! | [`io`] | PLY / PCD / XYZ / OBJ readers, PLY / OBJ / PCD writers |
 //! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
@@ -39,11 +41,13 @@ pub mod io;
 pub mod membrane;
 pub mod mesh;
 pub mod metrics;
+pub mod node;
 pub mod pipeline;
 pub mod separability;
 pub mod shapes;
 pub mod spline;
 pub mod synth;
+pub mod transport;
 pub mod wire;
 
 pub use cloud::{Aabb, Attribute, PointCloud, Vec3};

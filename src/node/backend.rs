@@ -1,0 +1,129 @@
+//! What the node hosts: the interface between the live transport and the
+//! frame pipeline.
+//!
+//! The node is codec- and algorithm-agnostic. A [`Backend`] names the input
+//! and output ROS types, creates one [`TopicProcessor`] per input topic (the
+//! per-stream trackers with their warm-start state live inside it), and
+//! encodes the periodic `/diagnostics` array. A processor turns one received
+//! sample into encoded output messages plus one [`ObjectReport`] per object
+//! (one object per topic, or one per segment label when the cloud carries
+//! labels). Processors run on the rayon compute pool, never on tokio workers.
+
+use super::stats::Level;
+use crate::transport::RosType;
+use std::time::Instant;
+
+/// The per-frame outputs a processor can produce.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum OutputKind {
+    /// `visualization_msgs/MarkerArray` (TRIANGLE_LIST per object, DELETEALL first).
+    Markers,
+    /// sepmem's stamped mesh message (one per object).
+    Mesh,
+    /// sepmem's per-frame diagnostics message.
+    FrameDiagnostics,
+}
+
+impl OutputKind {
+    /// All kinds, in publication order.
+    pub const ALL: [OutputKind; 3] = [
+        OutputKind::Mesh,
+        OutputKind::Markers,
+        OutputKind::FrameDiagnostics,
+    ];
+}
+
+/// One encoded output message.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Output {
+    /// Which output topic it goes to.
+    pub kind: OutputKind,
+    /// CDR bytes with encapsulation header.
+    pub payload: Vec<u8>,
+}
+
+/// One received frame handed to a processor.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    /// Input topic.
+    pub topic: String,
+    /// Serialized input message (CDR with encapsulation header).
+    pub payload: Vec<u8>,
+    /// Local receive time, ns since the Unix epoch.
+    pub received_ns: i64,
+    /// Publisher's source timestamp from the rmw_zenoh attachment, if any.
+    pub source_ns: Option<i64>,
+    /// Publisher sequence number from the attachment, if any.
+    pub sequence: Option<i64>,
+    /// Compute must stop iterating by this instant (per-frame deadline).
+    pub deadline: Instant,
+}
+
+/// How one object fared in one frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObjectReport {
+    /// Object stream id: the topic, or `topic#label` for labelled segments.
+    pub stream: String,
+    /// Global separability η_g of the final surface.
+    pub eta_g: f64,
+    /// Membrane iterations used.
+    pub iterations: u32,
+    /// Warm-started from the previous frame (else cold start).
+    pub warm: bool,
+    /// Level the pipeline assigns (WARN for a low η_g, a budget stop …).
+    pub level: Level,
+    /// Short human-readable summary (stop reason, why cold …).
+    pub message: String,
+}
+
+/// The result of processing one frame.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FrameResult {
+    /// Encoded outputs to publish.
+    pub outputs: Vec<Output>,
+    /// One report per object in the frame.
+    pub objects: Vec<ObjectReport>,
+    /// Why the frame failed (malformed input, degenerate cloud …); the
+    /// stream continues with the next frame.
+    pub error: Option<String>,
+}
+
+/// Per-input-topic processing state (the trackers of its objects).
+pub trait TopicProcessor: Send + 'static {
+    /// Process one frame; must not panic on bad input (report it in
+    /// [`FrameResult::error`]).
+    fn process(&mut self, frame: &Frame) -> FrameResult;
+
+    /// Outputs to publish when the stream is evicted or the node stops
+    /// (e.g. a DELETEALL marker array so viewers clear the objects).
+    fn on_evict(&mut self) -> Vec<Output>;
+}
+
+/// One status line of the `/diagnostics` array.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StatusEntry {
+    /// `<node>: <stream>`.
+    pub name: String,
+    /// Level.
+    pub level: Level,
+    /// Message.
+    pub message: String,
+    /// Hardware id (the node's host/zid).
+    pub hardware_id: String,
+    /// Key/value pairs (numbers as strings).
+    pub values: Vec<(String, String)>,
+}
+
+/// The frame pipeline as seen by the node.
+pub trait Backend: Send + Sync + 'static {
+    /// Type of the input topics (normally `sensor_msgs/msg/PointCloud2`).
+    fn input_type(&self) -> RosType;
+    /// Type published on an output topic.
+    fn output_type(&self, kind: OutputKind) -> RosType;
+    /// `diagnostic_msgs/msg/DiagnosticArray`.
+    fn diagnostics_type(&self) -> RosType;
+    /// A fresh processor for a newly seen input topic.
+    fn processor(&self, topic: &str) -> Box<dyn TopicProcessor>;
+    /// Encode a `DiagnosticArray` stamped `stamp_ns`.
+    fn encode_diagnostics(&self, stamp_ns: i64, frame_id: &str, status: &[StatusEntry]) -> Vec<u8>;
+}

@@ -1,0 +1,118 @@
+//! The live node: point-cloud topics in, meshes and diagnostics out.
+//!
+//! `sepmem node` subscribes to topic patterns over zenoh (rmw_zenoh,
+//! zenoh-bridge-ros2dds or plain keys, see [`crate::transport`]); every
+//! matching topic becomes an object stream with its own keep-latest slot
+//! ([`slot`]) and processor ([`backend`]). Compute runs on a rayon pool,
+//! results come back to tokio through oneshot channels, so tokio workers
+//! never block. Streams run in parallel; each frame has a deadline; silent
+//! streams are evicted and reported STALE; `/diagnostics` is published about
+//! once a second ([`stats`]); streams are split between instances by
+//! [`shard`]. See [`runtime`] for the task structure and shutdown.
+
+pub mod backend;
+#[cfg(feature = "zenoh")]
+pub mod runtime;
+pub mod shard;
+pub mod slot;
+pub mod stats;
+
+pub use backend::{
+    Backend, Frame, FrameResult, ObjectReport, Output, OutputKind, StatusEntry, TopicProcessor,
+};
+pub use shard::Shard;
+pub use stats::Level;
+
+use crate::transport::TransportConfig;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// Errors of the node.
+#[derive(Debug, Error)]
+pub enum NodeError {
+    /// Transport failure (zenoh session, keys, tokens).
+    #[error(transparent)]
+    Transport(#[from] crate::transport::TransportError),
+    /// Invalid shard settings.
+    #[error(transparent)]
+    Shard(#[from] shard::ShardError),
+    /// Invalid node settings.
+    #[error("invalid node configuration: {0}")]
+    Config(String),
+    /// The compute pool could not be created.
+    #[error("cannot create the compute thread pool: {0}")]
+    Pool(String),
+}
+
+/// Output topic names (`node.outputs`); `{topic}` is replaced by the input topic.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputTopics {
+    /// MarkerArray topic template.
+    pub markers: String,
+    /// sepmem mesh message topic template.
+    pub mesh: String,
+    /// sepmem per-frame diagnostics topic template.
+    pub frame_diagnostics: String,
+    /// DiagnosticArray topic (about 1 Hz, all streams).
+    pub diagnostics: String,
+}
+
+impl OutputTopics {
+    /// The template for one output kind.
+    pub fn template(&self, kind: OutputKind) -> &str {
+        match kind {
+            OutputKind::Markers => &self.markers,
+            OutputKind::Mesh => &self.mesh,
+            OutputKind::FrameDiagnostics => &self.frame_diagnostics,
+        }
+    }
+}
+
+/// The `node` section of the configuration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NodeConfig {
+    /// Input topic patterns (`*` = one name component, `**` = any number).
+    pub topics: Vec<String>,
+    /// Output topic names.
+    pub outputs: OutputTopics,
+    /// Per-frame deadline from receipt, in milliseconds.
+    pub deadline_ms: u64,
+    /// Period of the `/diagnostics` array, in milliseconds.
+    pub diagnostics_period_ms: u64,
+    /// A stream silent this long is evicted (state freed, reported STALE).
+    pub evict_after_ms: u64,
+    /// Maximum number of concurrent streams (samples of further topics are counted and ignored).
+    pub max_streams: usize,
+    /// Compute threads (0 = one per core).
+    pub compute_threads: usize,
+    /// Bound on graceful shutdown (in-flight frames are abandoned after it).
+    pub shutdown_timeout_ms: u64,
+    /// This instance's shard of the streams.
+    pub shard: Shard,
+    /// Transport (key mode, domain, zenoh session).
+    pub transport: TransportConfig,
+}
+
+impl NodeConfig {
+    /// Check the values that serde cannot.
+    ///
+    /// # Errors
+    /// [`NodeError`] naming the key at fault.
+    pub fn validate(&self) -> Result<(), NodeError> {
+        self.shard.validate()?;
+        if self.topics.is_empty() {
+            return Err(NodeError::Config("node.topics is empty".into()));
+        }
+        if self.diagnostics_period_ms == 0 {
+            return Err(NodeError::Config(
+                "node.diagnostics_period_ms must be > 0".into(),
+            ));
+        }
+        if self.max_streams == 0 {
+            return Err(NodeError::Config("node.max_streams must be > 0".into()));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,463 @@
+//! The node's scheduling on real zenoh sessions over loopback, with a test
+//! backend whose "compute" is a known sleep: keep-latest slots and drop
+//! counting under overload, isolation of a malformed stream, sharding,
+//! liveliness tokens and clean shutdown. (The end-to-end test with the real
+//! membrane and wire codecs is in `node_e2e.rs`.)
+#![allow(clippy::unwrap_used)]
+
+use sepmem::config::Config;
+use sepmem::node::runtime::{run, NodeSummary};
+use sepmem::node::{
+    Backend, Frame, FrameResult, Level, NodeConfig, ObjectReport, Output, OutputKind, Shard,
+    StatusEntry, TopicProcessor,
+};
+use sepmem::transport::liveliness::{EntityKind, Qos, Token};
+use sepmem::transport::{free_loopback_port, Participant, Received, RosType, TransportConfig};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// Test payload: CDR header, u64 frame index, u32 compute milliseconds.
+fn payload(index: u64, busy_ms: u32) -> Vec<u8> {
+    let mut v = vec![0, 1, 0, 0];
+    v.extend_from_slice(&index.to_le_bytes());
+    v.extend_from_slice(&busy_ms.to_le_bytes());
+    v
+}
+
+struct TestProc {
+    topic: String,
+    seen: Arc<Mutex<Vec<(String, u64)>>>,
+}
+
+impl TopicProcessor for TestProc {
+    fn process(&mut self, frame: &Frame) -> FrameResult {
+        if frame.payload.len() != 16 || frame.payload[..4] != [0, 1, 0, 0] {
+            return FrameResult {
+                error: Some(format!("malformed sample of {} bytes", frame.payload.len())),
+                ..FrameResult::default()
+            };
+        }
+        let index = u64::from_le_bytes(frame.payload[4..12].try_into().unwrap());
+        let busy = u32::from_le_bytes(frame.payload[12..16].try_into().unwrap());
+        std::thread::sleep(Duration::from_millis(u64::from(busy)));
+        self.seen.lock().unwrap().push((self.topic.clone(), index));
+        let mut out = vec![0, 1, 0, 0];
+        out.extend_from_slice(&index.to_le_bytes());
+        out.extend_from_slice(self.topic.as_bytes());
+        FrameResult {
+            outputs: vec![Output {
+                kind: OutputKind::Mesh,
+                payload: out,
+            }],
+            objects: vec![ObjectReport {
+                stream: self.topic.clone(),
+                eta_g: 0.9,
+                iterations: 3,
+                warm: index > 0,
+                level: Level::Ok,
+                message: "ok".into(),
+            }],
+            error: None,
+        }
+    }
+
+    fn on_evict(&mut self) -> Vec<Output> {
+        vec![Output {
+            kind: OutputKind::Markers,
+            payload: b"DELETEALL".to_vec(),
+        }]
+    }
+}
+
+struct TestBackend {
+    seen: Arc<Mutex<Vec<(String, u64)>>>,
+}
+
+impl Backend for TestBackend {
+    fn input_type(&self) -> RosType {
+        RosType::new("sensor_msgs/msg/PointCloud2", "RIHS01_in")
+    }
+    fn output_type(&self, kind: OutputKind) -> RosType {
+        match kind {
+            OutputKind::Markers => RosType::new("visualization_msgs/msg/MarkerArray", "RIHS01_m"),
+            OutputKind::Mesh => RosType::new("sepmem_msgs/msg/SurfaceMesh", "RIHS01_s"),
+            OutputKind::FrameDiagnostics => {
+                RosType::new("sepmem_msgs/msg/FrameDiagnostics", "RIHS01_f")
+            }
+        }
+    }
+    fn diagnostics_type(&self) -> RosType {
+        RosType::new("diagnostic_msgs/msg/DiagnosticArray", "RIHS01_d")
+    }
+    fn processor(&self, topic: &str) -> Box<dyn TopicProcessor> {
+        Box::new(TestProc {
+            topic: topic.to_string(),
+            seen: self.seen.clone(),
+        })
+    }
+    fn encode_diagnostics(&self, _stamp: i64, _frame: &str, status: &[StatusEntry]) -> Vec<u8> {
+        // Test encoding: one line per status, `name|level|k=v,k=v`.
+        let mut s = String::new();
+        for st in status {
+            let kv: Vec<String> = st.values.iter().map(|(k, v)| format!("{k}={v}")).collect();
+            s.push_str(&format!(
+                "{}|{}|{}\n",
+                st.name,
+                st.level.byte(),
+                kv.join(",")
+            ));
+        }
+        s.into_bytes()
+    }
+}
+
+fn pc2() -> RosType {
+    RosType::new("sensor_msgs/msg/PointCloud2", "RIHS01_in")
+}
+
+/// A harness participant listening on an ephemeral port, and a node config
+/// connecting to it.
+async fn harness(name: &str) -> (Participant, NodeConfig) {
+    let port = free_loopback_port().unwrap();
+    let h = Participant::open(&TransportConfig::loopback(
+        &format!("{name}_harness"),
+        Some(port),
+        &[],
+    ))
+    .await
+    .unwrap();
+    let mut cfg = Config::defaults().unwrap().node;
+    cfg.topics = vec![format!("/{name}/**")];
+    cfg.transport = TransportConfig::loopback(name, None, &[port]);
+    cfg.diagnostics_period_ms = 200;
+    cfg.compute_threads = 2;
+    cfg.shutdown_timeout_ms = 5000;
+    (h, cfg)
+}
+
+type Inbox = Arc<Mutex<Vec<Received>>>;
+
+async fn collect(
+    h: &Participant,
+    pattern: &str,
+    ty: &RosType,
+) -> (zenoh::pubsub::Subscriber<()>, Inbox) {
+    let inbox: Inbox = Arc::default();
+    let i = inbox.clone();
+    let sub = h
+        .subscribe(pattern, ty, move |r| i.lock().unwrap().push(r))
+        .await
+        .unwrap();
+    (sub, inbox)
+}
+
+async fn wait_for<F: Fn() -> bool>(f: F, what: &str) {
+    for _ in 0..800 {
+        if f() {
+            return;
+        }
+        tokio::time::sleep(Duration::from_millis(25)).await;
+    }
+    panic!("timed out waiting for {what}");
+}
+
+fn any_type(name: &str) -> RosType {
+    RosType::new(name, "x")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn overload_keeps_newest_counts_drops_and_isolates_a_malformed_stream() {
+    let (h, cfg) = harness("ovl").await;
+    let seen: Arc<Mutex<Vec<(String, u64)>>> = Arc::default();
+    let backend = Arc::new(TestBackend { seen: seen.clone() });
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let node = tokio::spawn(async move {
+        run(&cfg, backend, async {
+            let _ = stop_rx.await;
+        })
+        .await
+        .unwrap()
+    });
+    let (_msub, meshes) = collect(&h, "/ovl/**", &any_type("sepmem_msgs/msg/SurfaceMesh")).await;
+    let (_dsub, diags) = collect(
+        &h,
+        "/diagnostics",
+        &any_type("diagnostic_msgs/msg/DiagnosticArray"),
+    )
+    .await;
+    let fast = h
+        .publisher("/ovl/fast", &pc2(), Qos::SENSOR_DATA)
+        .await
+        .unwrap();
+    let slow = h
+        .publisher("/ovl/slow", &pc2(), Qos::SENSOR_DATA)
+        .await
+        .unwrap();
+    let bad = h
+        .publisher("/ovl/bad", &pc2(), Qos::SENSOR_DATA)
+        .await
+        .unwrap();
+    // Wait until the node is subscribed: a probe frame on `fast` comes back.
+    for k in 0.. {
+        if !meshes.lock().unwrap().is_empty() {
+            break;
+        }
+        assert!(k < 800, "no first mesh");
+        fast.put(payload(0, 0)).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(25)).await;
+    }
+    // `slow`: 40 frames back to back, each taking 50 ms to compute: most are
+    // replaced in the slot before the worker is free.
+    for i in 1..=40u64 {
+        slow.put(payload(i, 50)).await.unwrap();
+        bad.put(vec![0, 1, 0, 0, 9, 9]).await.unwrap();
+        fast.put(payload(i, 0)).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
+    // The newest `slow` frame (40) is always processed eventually.
+    wait_for(
+        || {
+            seen.lock()
+                .unwrap()
+                .iter()
+                .any(|(t, i)| t == "/ovl/slow" && *i == 40)
+        },
+        "last slow frame",
+    )
+    .await;
+    wait_for(
+        || {
+            seen.lock()
+                .unwrap()
+                .iter()
+                .any(|(t, i)| t == "/ovl/fast" && *i == 40)
+        },
+        "last fast frame",
+    )
+    .await;
+    // Diagnostics report the malformed stream as ERROR and the others not.
+    wait_for(
+        || {
+            diags.lock().unwrap().iter().any(|r| {
+                let s = String::from_utf8_lossy(&r.payload);
+                s.contains("ovl: /ovl/bad|2|") && s.contains("ovl: /ovl/fast|")
+            })
+        },
+        "diagnostics with the bad stream",
+    )
+    .await;
+    stop_tx.send(()).unwrap();
+    let summary: NodeSummary = tokio::time::timeout(Duration::from_secs(30), node)
+        .await
+        .unwrap()
+        .unwrap();
+    let get = |t: &str| {
+        summary
+            .streams
+            .iter()
+            .find(|s| s.topic == t)
+            .unwrap()
+            .clone()
+    };
+    let slow_s = get("/ovl/slow");
+    let slow_seen: Vec<u64> = seen
+        .lock()
+        .unwrap()
+        .iter()
+        .filter(|(t, _)| t == "/ovl/slow")
+        .map(|(_, i)| *i)
+        .collect();
+    // Every frame was either processed or counted as dropped, and under 20x
+    // overload most were dropped.
+    assert!(slow_s.received <= 40 && slow_s.received >= 30, "{slow_s:?}");
+    assert_eq!(slow_s.frames + slow_s.drops, slow_s.received, "{slow_s:?}");
+    assert_eq!(slow_s.frames as usize, slow_seen.len());
+    assert!(slow_s.drops >= 10, "{slow_s:?}");
+    // Processed frames are in increasing order (newest wins, never an old one).
+    assert!(slow_seen.windows(2).all(|w| w[0] < w[1]), "{slow_seen:?}");
+    let bad_s = get("/ovl/bad");
+    assert_eq!(bad_s.errors, bad_s.frames);
+    assert!(bad_s.frames >= 1);
+    let fast_s = get("/ovl/fast");
+    assert_eq!(fast_s.errors, 0);
+    assert!(summary.clean_shutdown);
+    // Meshes arrived for the good streams only, each naming its topic.
+    let meshes = meshes.lock().unwrap();
+    assert!(meshes.iter().all(|r| !r.key.contains("/ovl/bad/")));
+    assert!(meshes
+        .iter()
+        .any(|r| r.topic.as_deref() == Ok("/ovl/slow/mesh")));
+    for r in meshes.iter() {
+        let a = r.attachment.clone().unwrap().unwrap();
+        assert!(a.sequence >= 1);
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_shards_split_streams_without_overlap_or_gap() {
+    let (h, cfg) = harness("shd").await;
+    let seen: Arc<Mutex<Vec<(String, u64)>>> = Arc::default();
+    let mut nodes = Vec::new();
+    let mut stops = Vec::new();
+    for index in 0..2u32 {
+        let mut c = cfg.clone();
+        c.shard = Shard { index, count: 2 };
+        c.transport.node_name = format!("shd{index}");
+        let backend = Arc::new(TestBackend { seen: seen.clone() });
+        let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+        stops.push(tx);
+        nodes.push(tokio::spawn(async move {
+            run(&c, backend, async {
+                let _ = rx.await;
+            })
+            .await
+            .unwrap()
+        }));
+    }
+    let (_msub, meshes) = collect(&h, "/shd/**", &any_type("sepmem_msgs/msg/SurfaceMesh")).await;
+    let topics: Vec<String> = (0..8).map(|i| format!("/shd/obj{i}")).collect();
+    let mut pubs = Vec::new();
+    for t in &topics {
+        pubs.push(h.publisher(t, &pc2(), Qos::SENSOR_DATA).await.unwrap());
+    }
+    // Publish until every topic has produced at least one mesh.
+    let mut i = 0u64;
+    loop {
+        let done = topics.iter().all(|t| {
+            meshes
+                .lock()
+                .unwrap()
+                .iter()
+                .any(|r| r.topic.as_deref() == Ok(format!("{t}/mesh").as_str()))
+        });
+        if done {
+            break;
+        }
+        assert!(i < 400, "not every topic produced a mesh");
+        for p in &pubs {
+            p.put(payload(i, 0)).await.unwrap();
+        }
+        i += 1;
+        tokio::time::sleep(Duration::from_millis(25)).await;
+    }
+    for s in stops {
+        s.send(()).unwrap();
+    }
+    let mut owned: Vec<Vec<String>> = Vec::new();
+    for n in nodes {
+        let s = tokio::time::timeout(Duration::from_secs(30), n)
+            .await
+            .unwrap()
+            .unwrap();
+        assert!(s.clean_shutdown);
+        assert!(s.other_shard > 0, "each shard saw the other's samples");
+        owned.push(s.streams.iter().map(|s| s.topic.clone()).collect());
+    }
+    // No overlap, no gap, and the split follows the documented hash.
+    for t in &topics {
+        let owners: Vec<usize> = (0..2).filter(|k| owned[*k].contains(t)).collect();
+        assert_eq!(owners.len(), 1, "{t} owned by {owners:?}");
+        assert_eq!(owners[0] as u32, Shard::of(t, 2));
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tokens_are_declared_and_withdrawn_on_clean_shutdown() {
+    let (h, cfg) = harness("tok").await;
+    let seen: Arc<Mutex<Vec<(String, u64)>>> = Arc::default();
+    let backend = Arc::new(TestBackend { seen: seen.clone() });
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let node = tokio::spawn(async move {
+        run(&cfg, backend, async {
+            let _ = stop_rx.await;
+        })
+        .await
+        .unwrap()
+    });
+    let (_msub, markers) = collect(
+        &h,
+        "/tok/**",
+        &any_type("visualization_msgs/msg/MarkerArray"),
+    )
+    .await;
+    let p = h
+        .publisher("/tok/points", &pc2(), Qos::SENSOR_DATA)
+        .await
+        .unwrap();
+    for i in 0.. {
+        if seen.lock().unwrap().len() >= 2 {
+            break;
+        }
+        assert!(i < 800, "frames not processed");
+        p.put(payload(i, 0)).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(25)).await;
+    }
+    let tokens = liveliness(&h).await;
+    let mine: Vec<&Token> = tokens.iter().filter(|t| t.node == "tok").collect();
+    let kinds = |k: EntityKind| mine.iter().filter(|t| t.kind == k).count();
+    assert_eq!(kinds(EntityKind::Node), 1);
+    assert_eq!(kinds(EntityKind::Subscription), 1);
+    // /diagnostics + markers + mesh + frame diagnostics.
+    assert_eq!(kinds(EntityKind::Publisher), 4);
+    let sub = mine
+        .iter()
+        .find(|t| t.kind == EntityKind::Subscription)
+        .unwrap();
+    assert_eq!(sub.topic.as_ref().unwrap().topic, "/tok/points");
+    let topics: Vec<String> = mine
+        .iter()
+        .filter_map(|t| t.topic.as_ref().map(|x| x.topic.clone()))
+        .collect();
+    for want in [
+        "/diagnostics",
+        "/tok/points/mesh",
+        "/tok/points/mesh_markers",
+        "/tok/points/membrane_diagnostics",
+    ] {
+        assert!(topics.iter().any(|t| t == want), "{want} in {topics:?}");
+    }
+    stop_tx.send(()).unwrap();
+    let summary = tokio::time::timeout(Duration::from_secs(30), node)
+        .await
+        .unwrap()
+        .unwrap();
+    assert!(summary.clean_shutdown);
+    // The final DELETEALL markers were published and all tokens withdrawn.
+    wait_for(
+        || {
+            markers
+                .lock()
+                .unwrap()
+                .iter()
+                .any(|r| r.payload == b"DELETEALL")
+        },
+        "final DELETEALL",
+    )
+    .await;
+    let mut left = usize::MAX;
+    for _ in 0..100 {
+        left = liveliness(&h)
+            .await
+            .iter()
+            .filter(|t| t.node == "tok")
+            .count();
+        if left == 0 {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    assert_eq!(left, 0, "tokens left after shutdown");
+}
+
+async fn liveliness(h: &Participant) -> Vec<Token> {
+    let replies = h.session().liveliness().get("@ros2_lv/**").await.unwrap();
+    let mut out = Vec::new();
+    while let Ok(Ok(reply)) =
+        tokio::time::timeout(Duration::from_secs(3), replies.recv_async()).await
+    {
+        if let Ok(s) = reply.result() {
+            out.push(Token::parse(s.key_expr().as_str()).unwrap());
+        }
+    }
+    out
+}
