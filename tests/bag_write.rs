@@ -6,7 +6,6 @@
 mod common;
 
 use std::path::Path;
-use std::process::Command;
 
 use sepmem::bag::{Bag, BagWriter, Qos};
 use sepmem::cloud::{PointCloud, Vec3};
@@ -14,37 +13,8 @@ use sepmem::wire::msgs::*;
 use sepmem::wire::pointcloud2::encode_pointcloud2;
 use sepmem::wire::{decode, msgdef};
 
-fn python_tools() -> bool {
-    Command::new("python3")
-        .args(["-c", "import rosbags, mcap, mcap_ros2"])
-        .output()
-        .is_ok_and(|o| o.status.success())
-}
-
-/// Run check_bag.py; returns its stdout, or None (with a visible SKIPPED line).
 fn external_check(bag: &Path, args: &[String], test: &str) -> Option<String> {
-    if !python_tools() {
-        eprintln!(
-            "SKIPPED {test}: python3 with rosbags/mcap/mcap-ros2-support not available \
-             (pip install -r tests/python/requirements.txt)"
-        );
-        return None;
-    }
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/check_bag.py");
-    let out = Command::new("python3")
-        .arg(script)
-        .arg(bag)
-        .args(args)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "check_bag.py failed on {}:\n{stdout}\n{}",
-        bag.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    Some(stdout)
+    common::external_bag_check(bag, args, test)
 }
 
 fn sample_cloud(n: usize) -> PointCloud {

@@ -167,30 +167,11 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
         }
     }
     // Independent reader, when Python rosbags/mcap are installed.
-    let ok = std::process::Command::new("python3")
-        .args(["-c", "import rosbags, mcap"])
-        .status()
-        .is_ok_and(|s| s.success());
-    if ok {
-        let script =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/check_bag.py");
-        let o = std::process::Command::new("python3")
-            .arg(script)
-            .arg(&out_path)
-            .output()
-            .unwrap();
-        assert!(
-            o.status.success(),
-            "check_bag.py: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        let text = String::from_utf8_lossy(&o.stdout);
+    if let Some(text) = common::external_bag_check(&out_path, &[], "replay::mosd") {
         assert!(
             text.contains("OK rosbags+mcap: 3 topics, 42 messages decoded"),
             "{text}"
         );
-    } else {
-        eprintln!("SKIPPED external bag check: python3 with rosbags and mcap not available");
     }
     let _ = summary;
 }

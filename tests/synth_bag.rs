@@ -9,7 +9,6 @@ mod common;
 
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::process::Command;
 
 use sepmem::bag::Bag;
 use sepmem::synth::sequence::{
@@ -22,39 +21,13 @@ use sepmem::wire::pointcloud2::{decode_pointcloud2_cdr, WireConfig};
 const PC2: &str = "sensor_msgs/msg/PointCloud2";
 const GT: &str = "sepmem_msgs/msg/GroundTruth";
 
-fn python_tools() -> bool {
-    Command::new("python3")
-        .args(["-c", "import rosbags, mcap, mcap_ros2"])
-        .output()
-        .is_ok_and(|o| o.status.success())
-}
-
-/// check_bag.py with `--expect`/`--type` for every topic; None (with a
-/// visible SKIPPED line) when the Python readers are absent.
 fn external_check(bag: &Path, expect: &[(&str, &str, u64)], test: &str) -> Option<String> {
-    if !python_tools() {
-        eprintln!(
-            "SKIPPED {test} (external check): python3 with rosbags/mcap/mcap-ros2-support \
-             not available (pip install -r tests/python/requirements.txt)"
-        );
-        return None;
-    }
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/check_bag.py");
-    let mut cmd = Command::new("python3");
-    cmd.arg(script).arg(bag);
+    let mut args = Vec::new();
     for (topic, ty, n) in expect {
-        cmd.arg("--expect").arg(format!("{topic}={n}"));
-        cmd.arg("--type").arg(format!("{topic}={ty}"));
+        args.extend(["--expect".to_string(), format!("{topic}={n}")]);
+        args.extend(["--type".to_string(), format!("{topic}={ty}")]);
     }
-    let out = cmd.output().unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "check_bag.py failed on {}:\n{stdout}\n{}",
-        bag.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    Some(stdout)
+    common::external_bag_check(bag, &args, test)
 }
 
 fn spheres(layout: Layout, frames: usize) -> SequenceSpec {
