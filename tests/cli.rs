@@ -28,9 +28,17 @@ fn p(path: &Path) -> &str {
     path.to_str().unwrap()
 }
 
-/// 4,000 points on the ellipsoid shape, plus 5 % noise-free outliers.
-fn ellipsoid_scan(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
-    let shape = sepmem::shapes::ellipsoid(64).unwrap();
+/// 4,000 points on the ellipsoid shape, plus 5 % scattered outliers and a
+/// NaN point, all mapped by `x ↦ scale·x + offset` (the ground truth too).
+fn ellipsoid_scan(
+    dir: &Path,
+    scale: f64,
+    offset: Vec3,
+) -> (std::path::PathBuf, std::path::PathBuf) {
+    let mut shape = sepmem::shapes::ellipsoid(64).unwrap();
+    for v in &mut shape.mesh.vertices {
+        *v = *v * scale + offset;
+    }
     let gt = dir.join("gt.ply");
     sepmem::io::save_mesh(&gt, &shape.mesh).unwrap();
     let s = sepmem::metrics::sample_surface(&shape.mesh, 4000, 7).unwrap();
@@ -44,7 +52,7 @@ fn ellipsoid_scan(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
         (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
     };
     for _ in 0..200 {
-        pts.push(Vec3::new(1.2 * rnd(), 1.2 * rnd(), 1.2 * rnd()));
+        pts.push(Vec3::new(1.2 * rnd(), 1.2 * rnd(), 1.2 * rnd()) * scale + offset);
     }
     pts.push(Vec3::new(f64::NAN, 0.0, 0.0));
     let cloud_path = dir.join("scan.ply");
@@ -53,10 +61,53 @@ fn ellipsoid_scan(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
     (cloud_path, gt)
 }
 
+/// Reconstruct `scan`, check the output mesh and return its F-score against `gt`.
+fn reconstruct_and_score(dir: &Path, scan: &Path, gt: &Path) -> f64 {
+    let mesh = dir.join("mesh.ply");
+    let o = sepmem(&["reconstruct", p(scan), "-o", p(&mesh)]);
+    assert!(o.status.success(), "{}", text(&o));
+    let loaded = sepmem::io::load_mesh(&mesh).unwrap();
+    assert!(loaded.mesh.topology().is_watertight());
+    assert!(loaded.mesh.signed_volume() > 0.0);
+    let o = sepmem(&[
+        "eval",
+        "--pred",
+        p(&mesh),
+        "--gt",
+        p(gt),
+        "--json",
+        "--set",
+        "metrics.samples=30000",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let m: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    m["fscore"].as_f64().unwrap()
+}
+
+#[test]
+fn any_unit_and_position_gives_the_same_reconstruction() {
+    // The same object in metres at the origin, in millimetres far away, and
+    // 100 times smaller: lengths in the config are relative to the object.
+    let mut scores = Vec::new();
+    for (scale, offset) in [
+        (1.0, Vec3::zeros()),
+        (1000.0, Vec3::new(2.5e4, -1.0e4, 3.0e3)),
+        (0.01, Vec3::new(0.3, 0.2, 0.1)),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let (scan, gt) = ellipsoid_scan(dir.path(), scale, offset);
+        scores.push(reconstruct_and_score(dir.path(), &scan, &gt));
+    }
+    assert!(scores.iter().all(|&f| f >= 0.95), "F-scores {scores:?}");
+    let spread =
+        scores.iter().cloned().fold(0.0, f64::max) - scores.iter().cloned().fold(1.0, f64::min);
+    assert!(spread < 0.02, "F-scores {scores:?} depend on the unit");
+}
+
 #[test]
 fn reconstruct_then_eval_scores_the_mesh_against_ground_truth() {
     let dir = tempfile::tempdir().unwrap();
-    let (scan, gt) = ellipsoid_scan(dir.path());
+    let (scan, gt) = ellipsoid_scan(dir.path(), 1.0, Vec3::zeros());
     let mesh = dir.path().join("mesh.ply");
     let o = sepmem(&["reconstruct", p(&scan), "-o", p(&mesh)]);
     assert!(o.status.success(), "{}", text(&o));
