@@ -61,11 +61,13 @@ fn ellipsoid_scan(
     (cloud_path, gt)
 }
 
-/// Reconstruct `scan`, check the output mesh and return its F-score against `gt`.
-fn reconstruct_and_score(dir: &Path, scan: &Path, gt: &Path) -> f64 {
+/// Reconstruct `scan`, check the output mesh (watertight, outward) and
+/// return its F-score against `gt` (by `sepmem eval`) and the summary line.
+fn reconstruct_and_score(dir: &Path, scan: &Path, gt: &Path) -> (f64, String) {
     let mesh = dir.join("mesh.ply");
     let o = sepmem(&["reconstruct", p(scan), "-o", p(&mesh)]);
     assert!(o.status.success(), "{}", text(&o));
+    let line = String::from_utf8_lossy(&o.stdout).to_string();
     let loaded = sepmem::io::load_mesh(&mesh).unwrap();
     assert!(loaded.mesh.topology().is_watertight());
     assert!(loaded.mesh.signed_volume() > 0.0);
@@ -81,7 +83,8 @@ fn reconstruct_and_score(dir: &Path, scan: &Path, gt: &Path) -> f64 {
     ]);
     assert!(o.status.success(), "{}", text(&o));
     let m: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    m["fscore"].as_f64().unwrap()
+    assert_eq!(m["samples"].as_u64(), Some(30000));
+    (m["fscore"].as_f64().unwrap(), line)
 }
 
 #[test]
@@ -96,7 +99,7 @@ fn any_unit_and_position_gives_the_same_reconstruction() {
     ] {
         let dir = tempfile::tempdir().unwrap();
         let (scan, gt) = ellipsoid_scan(dir.path(), scale, offset);
-        scores.push(reconstruct_and_score(dir.path(), &scan, &gt));
+        scores.push(reconstruct_and_score(dir.path(), &scan, &gt).0);
     }
     assert!(scores.iter().all(|&f| f >= 0.95), "F-scores {scores:?}");
     let spread =
@@ -108,10 +111,7 @@ fn any_unit_and_position_gives_the_same_reconstruction() {
 fn reconstruct_then_eval_scores_the_mesh_against_ground_truth() {
     let dir = tempfile::tempdir().unwrap();
     let (scan, gt) = ellipsoid_scan(dir.path(), 1.0, Vec3::zeros());
-    let mesh = dir.path().join("mesh.ply");
-    let o = sepmem(&["reconstruct", p(&scan), "-o", p(&mesh)]);
-    assert!(o.status.success(), "{}", text(&o));
-    let line = String::from_utf8_lossy(&o.stdout).to_string();
+    let (f, line) = reconstruct_and_score(dir.path(), &scan, &gt);
     assert_eq!(line.lines().count(), 1, "one summary line: {line}");
     for key in [
         "points in",
@@ -125,24 +125,7 @@ fn reconstruct_then_eval_scores_the_mesh_against_ground_truth() {
     ] {
         assert!(line.contains(key), "summary lacks `{key}`: {line}");
     }
-    let loaded = sepmem::io::load_mesh(&mesh).unwrap();
-    assert!(loaded.mesh.topology().is_watertight());
-    assert!(loaded.mesh.signed_volume() > 0.0);
-    let o = sepmem(&[
-        "eval",
-        "--pred",
-        p(&mesh),
-        "--gt",
-        p(&gt),
-        "--json",
-        "--set",
-        "metrics.samples=30000",
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let m: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    let f = m["fscore"].as_f64().unwrap();
-    assert!(f >= 0.95, "F-score {f} of the reconstruction: {}", text(&o));
-    assert_eq!(m["samples"].as_u64(), Some(30000));
+    assert!(f >= 0.95, "F-score {f} of the reconstruction");
     // The ground truth against itself scores F = 1 in the table output.
     let o = sepmem(&[
         "eval",
