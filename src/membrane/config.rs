@@ -120,6 +120,11 @@ pub struct MembraneConfig {
     pub attributes: Vec<AttributeWeight>,
     /// Worker threads for the per-sample search (0 = all cores, 1 = serial).
     pub threads: usize,
+    /// Sensor position for single-view clouds: `"auto"` (the frame origin
+    /// when the cloud is one layer seen from it), `"none"`, or `[x, y, z]`.
+    pub viewpoint: super::view::Viewpoint,
+    /// Complete the unseen side of a single view by the mirror prior.
+    pub view_completion: bool,
 }
 
 impl Default for MembraneConfig {
@@ -165,6 +170,8 @@ impl Default for MembraneConfig {
             spatial_weight: 1.0,
             attributes: Vec::new(),
             threads: 0,
+            viewpoint: super::view::Viewpoint::Mode(super::view::ViewMode::Auto),
+            view_completion: true,
         }
     }
 }

@@ -13,6 +13,7 @@ use super::config::MembraneConfig;
 use super::extract::extract_mesh;
 use super::init::octagon;
 use super::occupancy::OutsideGrid;
+use super::view;
 use super::{Budget, MembraneError, PhaseTimes, Reconstruction, Report, StopReason, WarmStart};
 use crate::cloud::{Aabb, CloudError, PointCloud, Vec3};
 use crate::density::Density;
@@ -390,6 +391,21 @@ pub(crate) fn run(
         let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
         (*m).max(1e-9 * scale)
     };
+    // Single views: the viewpoint, its z-buffer, and the mirrored completion
+    // of the unseen side (membrane/view.rs).
+    let (mut points, mut d_used) = (points, d_used);
+    let view = view::resolve(cfg.viewpoint, &points, delta);
+    let mut points_completed = 0;
+    if let (Some(vb), true) = (&view, cfg.view_completion) {
+        let extra = vb.complete(&points);
+        points_completed = extra.len();
+        points.reserve(extra.len());
+        d_used.reserve(extra.len());
+        for (q, i) in extra {
+            points.push(q);
+            d_used.push(d_used[i]);
+        }
+    }
     let index = SpatialIndex::new(&points)?;
     let searcher = if cfg.local_delta {
         Searcher::new(&index, Delta::Local(&d_used), cfg.boundaries)?
@@ -403,6 +419,13 @@ pub(crate) fn run(
             cfg.inward_min_points,
             1 << 22,
         )
+        .map(|mut g| {
+            // The occluded back of a single view is unknown, not empty.
+            if let Some(vb) = &view {
+                g.restrict(|c| vb.is_seen_free(c));
+            }
+            g
+        })
     } else {
         None
     };
@@ -576,6 +599,11 @@ pub(crate) fn run(
         points_non_finite,
         points_outliers,
         points_used: points.len(),
+        points_completed,
+        viewpoint: view.as_ref().map(|v| {
+            let e = v.eye();
+            [e.x, e.y, e.z]
+        }),
         delta,
         scale,
         grid: [m, l],

@@ -28,6 +28,7 @@ pub mod evolve;
 pub mod extract;
 pub mod init;
 pub mod occupancy;
+pub mod view;
 
 pub use config::{AttributeWeight, MembraneConfig, PoleAxis};
 pub use extract::{extract_mesh, SEPARABILITY_CHANNEL};
@@ -163,8 +164,12 @@ pub struct Report {
     pub points_non_finite: usize,
     /// Points dropped by the k-NN outlier filter.
     pub points_outliers: usize,
-    /// Points the membrane used.
+    /// Points the membrane used (including the completion points).
     pub points_used: usize,
+    /// Mirror points completing the unseen side of a single view (0 without a viewpoint).
+    pub points_completed: usize,
+    /// The viewpoint used (given or detected), if any.
+    pub viewpoint: Option<[f64; 3]>,
     /// Global point spacing δ (median k-NN distance) in input units.
     pub delta: f64,
     /// Object size (longest bounding-box edge of the used points) in input units.

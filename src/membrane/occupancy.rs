@@ -174,6 +174,21 @@ impl OutsideGrid {
         self.outside[(z * ny + y) * nx + x]
     }
 
+    /// Keep the outside label only where `keep(cell centre)` holds (e.g. only
+    /// in space a camera saw empty, [`super::view::ViewBuffer::is_seen_free`]).
+    pub fn restrict(&mut self, keep: impl Fn(&Vec3) -> bool) {
+        let [nx, ny, _] = self.dims;
+        let voxel = 1.0 / self.inv_voxel;
+        for (c, o) in self.outside.iter_mut().enumerate() {
+            if *o {
+                let (x, y, z) = (c % nx, (c / nx) % ny, c / (nx * ny));
+                let centre =
+                    self.origin + Vec3::new(x as f64 + 0.5, y as f64 + 0.5, z as f64 + 0.5) * voxel;
+                *o = keep(&centre);
+            }
+        }
+    }
+
     /// Fraction of cells labelled outside (diagnostics).
     pub fn outside_fraction(&self) -> f64 {
         self.outside.iter().filter(|&&o| o).count() as f64 / self.outside.len().max(1) as f64

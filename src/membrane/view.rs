@@ -1,0 +1,394 @@
+//! Single-view clouds: what a depth camera could and could not see.
+//!
+//! On a robot the normal input is a *partial view*: one depth camera sees the
+//! side of the object facing it. The paper's membrane (§III-D) assumes points
+//! all around; on a partial view the occupancy inside/outside grid
+//! ([`super::occupancy`]) leaks through the unseen back, the inward force
+//! folds the back of the membrane onto the visible shell, and the closure
+//! collapses. This module supplies what the sensor geometry knows:
+//!
+//! 1. **Viewpoint.** Given (`membrane.viewpoint = [x, y, z]`), or detected
+//!    (`"auto"`): the origin of the cloud's frame (a sensor frame) is taken
+//!    as the viewpoint when it lies outside the cloud's bounding box and the
+//!    cloud is a single layer seen from it — in an angular z-buffer from the
+//!    origin, at most [`MAX_TWO_LAYER_FRACTION`] of the occupied bins hold
+//!    two depth layers (a gap over [`LAYER_GAP_DELTA`]·δ), where a scan from
+//!    all around holds two layers (front and back) in nearly every bin.
+//! 2. **Visibility.** The z-buffer keeps the nearest range per bin. A place
+//!    is *seen free* when it is nearer than the surface seen in its direction
+//!    (or nothing was seen there); it is *occluded* when it is behind it.
+//!    The inward force then acts only in seen-free space: the unseen back is
+//!    unknown space, not empty space.
+//! 3. **Completion** (`membrane.view_completion`). The unseen side is
+//!    completed by a symmetry prior: the visible points are mirrored through
+//!    the plane perpendicular to the mean view direction at depth
+//!    `z₀ + max(V, ½·min(Lᵤ, L_w))` (`z₀` the front, `V` the visible depth,
+//!    `Lᵤ, L_w` the lateral extents). For a sphere cap or a cylinder seen from
+//!    the side this is the rim plane (the true back), for a box seen corner-on
+//!    the far corner, and for a box seen face-on a depth equal to its smaller
+//!    width. Mirrored points that fall in seen-free space are discarded: the
+//!    camera saw that space empty. These completion points are a shape prior,
+//!    reported as `points_completed`; the separability's non-data counts are
+//!    still never materialised.
+
+use crate::cloud::Vec3;
+use serde::{Deserialize, Serialize};
+
+/// Largest fraction of two-layer bins for a cloud to count as one view.
+pub const MAX_TWO_LAYER_FRACTION: f64 = 0.2;
+/// Depth gap (in δ) that separates two layers within one z-buffer bin.
+pub const LAYER_GAP_DELTA: f64 = 4.0;
+/// Angular z-buffer bin edge, in δ at the median range.
+const BIN_DELTA: f64 = 2.0;
+/// Visibility margin, in δ: within it a place counts as on the seen surface.
+const MARGIN_DELTA: f64 = 2.0;
+/// Largest z-buffer side (bins).
+const MAX_SIDE: usize = 1024;
+
+/// Where the sensor was (`membrane.viewpoint`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Viewpoint {
+    /// `"auto"` or `"none"`.
+    Mode(ViewMode),
+    /// A known sensor position in the cloud's frame.
+    Point([f64; 3]),
+}
+
+/// Automatic or no viewpoint.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ViewMode {
+    /// The frame origin, when the cloud is a single view from it.
+    Auto,
+    /// Treat every cloud as seen from all around.
+    None,
+}
+
+/// An angular z-buffer of a cloud seen from a viewpoint (gnomonic projection
+/// on the plane perpendicular to the mean view direction).
+#[derive(Debug, Clone)]
+pub struct ViewBuffer {
+    eye: Vec3,
+    dir: Vec3,
+    u: Vec3,
+    w: Vec3,
+    lo: [f64; 2],
+    inv_bin: f64,
+    dims: [usize; 2],
+    /// Nearest range per bin (`INFINITY` where nothing was seen).
+    near: Vec<f64>,
+    margin: f64,
+}
+
+impl ViewBuffer {
+    /// Build the z-buffer of `points` seen from `eye`. `None` when a point is
+    /// not in front of the eye (within 80° of the mean view direction) or the
+    /// geometry is degenerate.
+    pub fn new(points: &[Vec3], eye: Vec3, delta: f64) -> Option<Self> {
+        if points.is_empty() || !(delta > 0.0 && delta.is_finite()) {
+            return None;
+        }
+        let centroid = points.iter().sum::<Vec3>() / points.len() as f64;
+        let dir = (centroid - eye).try_normalize(1e-12)?;
+        let helper = if dir.x.abs() < 0.9 {
+            Vec3::x()
+        } else {
+            Vec3::y()
+        };
+        let u = dir.cross(&helper).normalize();
+        let w = dir.cross(&u);
+        let cos_min = 10f64.to_radians().sin();
+        let mut ranges = Vec::with_capacity(points.len());
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        for p in points {
+            let d = p - eye;
+            let r = d.norm();
+            let along = d.dot(&dir);
+            if !(r > 0.0) || along < cos_min * r {
+                return None;
+            }
+            let a = [d.dot(&u) / along, d.dot(&w) / along];
+            for k in 0..2 {
+                lo[k] = lo[k].min(a[k]);
+                hi[k] = hi[k].max(a[k]);
+            }
+            ranges.push(r);
+        }
+        let mut sorted = ranges.clone();
+        let mid = sorted.len() / 2;
+        let (_, median_r, _) = sorted.select_nth_unstable_by(mid, f64::total_cmp);
+        let mut bin = BIN_DELTA * delta / median_r.max(f64::MIN_POSITIVE);
+        let mut dims;
+        loop {
+            dims = [
+                ((hi[0] - lo[0]) / bin).ceil() as usize + 3,
+                ((hi[1] - lo[1]) / bin).ceil() as usize + 3,
+            ];
+            if dims[0] <= MAX_SIDE && dims[1] <= MAX_SIDE {
+                break;
+            }
+            bin *= 1.5;
+        }
+        let lo = [lo[0] - bin, lo[1] - bin];
+        let mut vb = Self {
+            eye,
+            dir,
+            u,
+            w,
+            lo,
+            inv_bin: 1.0 / bin,
+            dims,
+            near: vec![f64::INFINITY; dims[0] * dims[1]],
+            margin: MARGIN_DELTA * delta,
+        };
+        for (p, &r) in points.iter().zip(&ranges) {
+            if let Some(c) = vb.cell(p) {
+                vb.near[c] = vb.near[c].min(r);
+            }
+        }
+        Some(vb)
+    }
+
+    /// The viewpoint.
+    pub fn eye(&self) -> Vec3 {
+        self.eye
+    }
+
+    /// Bin of `p` (`None` when behind the eye or beyond the buffer).
+    fn cell(&self, p: &Vec3) -> Option<usize> {
+        let d = p - self.eye;
+        let along = d.dot(&self.dir);
+        if along <= 0.0 {
+            return None;
+        }
+        let x = ((d.dot(&self.u) / along - self.lo[0]) * self.inv_bin).floor();
+        let y = ((d.dot(&self.w) / along - self.lo[1]) * self.inv_bin).floor();
+        if !(x >= 0.0 && y >= 0.0) {
+            return None;
+        }
+        let (x, y) = (x as usize, y as usize);
+        (x < self.dims[0] && y < self.dims[1]).then_some(y * self.dims[0] + x)
+    }
+
+    /// Nearest seen range in the direction of `p` over its bin and the 8
+    /// around it (`INFINITY` when nothing was seen there).
+    fn nearest_seen(&self, p: &Vec3) -> f64 {
+        let Some(c) = self.cell(p) else {
+            return f64::INFINITY;
+        };
+        let (x, y) = (c % self.dims[0], c / self.dims[0]);
+        let mut best = f64::INFINITY;
+        for yy in y.saturating_sub(1)..=(y + 1).min(self.dims[1] - 1) {
+            for xx in x.saturating_sub(1)..=(x + 1).min(self.dims[0] - 1) {
+                best = best.min(self.near[yy * self.dims[0] + xx]);
+            }
+        }
+        best
+    }
+
+    /// True when the camera saw through `p`: it is nearer than the surface
+    /// seen in its direction (by more than the margin), or nothing was seen
+    /// in its direction.
+    pub fn is_seen_free(&self, p: &Vec3) -> bool {
+        let r = (p - self.eye).norm();
+        r + self.margin < self.nearest_seen(p)
+    }
+
+    /// True when `p` lies behind the seen surface (by more than the margin).
+    pub fn is_occluded(&self, p: &Vec3) -> bool {
+        let near = self.nearest_seen(p);
+        near.is_finite() && (p - self.eye).norm() > near + self.margin
+    }
+
+    /// Fraction of occupied bins (with at least two points) holding two
+    /// depth layers separated by more than `gap`.
+    fn two_layer_fraction(&self, points: &[Vec3], gap: f64) -> f64 {
+        let mut keyed: Vec<(usize, f64)> = points
+            .iter()
+            .filter_map(|p| self.cell(p).map(|c| (c, (p - self.eye).norm())))
+            .collect();
+        keyed.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+        let (mut bins, mut layered) = (0usize, 0usize);
+        let mut i = 0;
+        while i < keyed.len() {
+            let mut j = i + 1;
+            let mut split = false;
+            while j < keyed.len() && keyed[j].0 == keyed[i].0 {
+                split |= keyed[j].1 - keyed[j - 1].1 > gap;
+                j += 1;
+            }
+            if j - i >= 2 {
+                bins += 1;
+                layered += usize::from(split);
+            }
+            i = j;
+        }
+        if bins == 0 {
+            1.0
+        } else {
+            layered as f64 / bins as f64
+        }
+    }
+
+    /// The mirrored completion of `points` (see the module docs): the mirror
+    /// images that fall in occluded space, each with the index of its source.
+    pub fn complete(&self, points: &[Vec3]) -> Vec<(Vec3, usize)> {
+        let n = points.len();
+        if n < 8 {
+            return Vec::new();
+        }
+        let quantiles = |mut v: Vec<f64>| -> (f64, f64) {
+            let lo_i = (0.01 * (n - 1) as f64) as usize;
+            let hi_i = (0.99 * (n - 1) as f64) as usize;
+            let (_, lo, _) = v.select_nth_unstable_by(lo_i, f64::total_cmp);
+            let lo = *lo;
+            let (_, hi, _) = v.select_nth_unstable_by(hi_i, f64::total_cmp);
+            (lo, *hi)
+        };
+        let depth = |p: &Vec3| (p - self.eye).dot(&self.dir);
+        let (z0, z1) = quantiles(points.iter().map(depth).collect());
+        let (u0, u1) = quantiles(points.iter().map(|p| (p - self.eye).dot(&self.u)).collect());
+        let (w0, w1) = quantiles(points.iter().map(|p| (p - self.eye).dot(&self.w)).collect());
+        let lateral = (u1 - u0).min(w1 - w0);
+        let plane = z0 + (z1 - z0).max(0.5 * lateral);
+        points
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| {
+                let z = depth(p);
+                if z >= plane {
+                    return None;
+                }
+                let q = p + self.dir * (2.0 * (plane - z));
+                self.is_occluded(&q).then_some((q, i))
+            })
+            .collect()
+    }
+}
+
+/// The view of `points` for `viewpoint` (see the module docs): `None` for
+/// `"none"`, and for `"auto"` unless the origin sees the cloud as one layer.
+pub fn resolve(viewpoint: Viewpoint, points: &[Vec3], delta: f64) -> Option<ViewBuffer> {
+    match viewpoint {
+        Viewpoint::Mode(ViewMode::None) => None,
+        Viewpoint::Point(p) => ViewBuffer::new(points, Vec3::new(p[0], p[1], p[2]), delta),
+        Viewpoint::Mode(ViewMode::Auto) => {
+            let eye = Vec3::zeros();
+            let mut lo = Vec3::repeat(f64::INFINITY);
+            let mut hi = Vec3::repeat(f64::NEG_INFINITY);
+            for p in points {
+                lo = lo.inf(p);
+                hi = hi.sup(p);
+            }
+            let inside = (0..3).all(|k| lo[k] - delta <= eye[k] && eye[k] <= hi[k] + delta);
+            if inside {
+                return None;
+            }
+            let vb = ViewBuffer::new(points, eye, delta)?;
+            (vb.two_layer_fraction(points, LAYER_GAP_DELTA * delta) <= MAX_TWO_LAYER_FRACTION)
+                .then_some(vb)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Fibonacci sphere of `n` points, radius `r`, centre `c`.
+    fn sphere(n: usize, r: f64, c: Vec3) -> Vec<Vec3> {
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let s = (1.0 - z * z).sqrt();
+                let t = golden * i as f64;
+                c + Vec3::new(s * t.cos(), s * t.sin(), z) * r
+            })
+            .collect()
+    }
+
+    #[test]
+    fn auto_detects_a_single_view_and_rejects_a_full_scan() {
+        let c = Vec3::new(0.1, -0.05, 1.0);
+        let full = sphere(6000, 0.1, c);
+        // δ ≈ spacing of 6000 points on a 0.1 sphere.
+        let delta = (4.0 * std::f64::consts::PI * 0.01 / 6000.0).sqrt();
+        assert!(resolve(Viewpoint::Mode(ViewMode::Auto), &full, delta).is_none());
+        // The cap facing the origin.
+        let cap: Vec<Vec3> = full
+            .iter()
+            .copied()
+            .filter(|p| (p - c).dot(&(-c).normalize()) > 0.05 * 0.1)
+            .collect();
+        let vb = resolve(Viewpoint::Mode(ViewMode::Auto), &cap, delta).expect("single view");
+        assert_eq!(vb.eye(), Vec3::zeros());
+        // A cloud around the origin has no outside viewpoint.
+        let around = sphere(2000, 1.0, Vec3::zeros());
+        assert!(resolve(Viewpoint::Mode(ViewMode::Auto), &around, 0.05).is_none());
+        assert!(resolve(Viewpoint::Mode(ViewMode::None), &cap, delta).is_none());
+        assert!(resolve(Viewpoint::Point([0.0, 0.0, 0.0]), &cap, delta).is_some());
+    }
+
+    #[test]
+    fn visibility_and_mirror_completion_of_a_sphere_cap() {
+        let c = Vec3::new(0.0, 0.0, 1.0);
+        let r = 0.1;
+        let full = sphere(8000, r, c);
+        let delta = (4.0 * std::f64::consts::PI * r * r / 8000.0).sqrt();
+        let cap: Vec<Vec3> = full.iter().copied().filter(|p| p.z < c.z).collect();
+        let vb = ViewBuffer::new(&cap, Vec3::zeros(), delta).unwrap();
+        // In front of the cap and beside the sphere: seen free; the centre and
+        // the back: occluded.
+        assert!(vb.is_seen_free(&Vec3::new(0.0, 0.0, 0.85)));
+        assert!(vb.is_seen_free(&Vec3::new(0.2, 0.0, 1.0)));
+        assert!(vb.is_occluded(&c));
+        assert!(vb.is_occluded(&Vec3::new(0.0, 0.0, 1.1)));
+        assert!(!vb.is_seen_free(&c));
+        // The mirror completes the back hemisphere: every completion point lies
+        // on the sphere, and they cover the back.
+        let done = vb.complete(&cap);
+        assert!(
+            done.len() > cap.len() * 8 / 10,
+            "{} of {}",
+            done.len(),
+            cap.len()
+        );
+        for (q, i) in &done {
+            assert!(*i < cap.len());
+            assert!(((q - c).norm() - r).abs() < 0.1 * r, "{q:?}");
+            assert!(q.z >= c.z - 0.02 * r, "{q:?}");
+        }
+        // A face-on square gets a back at the depth of its width.
+        let mut face = Vec::new();
+        for i in 0..40 {
+            for j in 0..40 {
+                face.push(Vec3::new(
+                    -0.1 + 0.005 * f64::from(i),
+                    -0.1 + 0.005 * f64::from(j),
+                    1.0 + 0.0001 * f64::from((i * j) % 3),
+                ));
+            }
+        }
+        let vb = ViewBuffer::new(&face, Vec3::zeros(), 0.005).unwrap();
+        let done = vb.complete(&face);
+        assert!(!done.is_empty());
+        let mean_z = done.iter().map(|(q, _)| q.z).sum::<f64>() / done.len() as f64;
+        assert!((mean_z - 1.19).abs() < 0.03, "back at {mean_z}");
+    }
+
+    #[test]
+    fn degenerate_input_gives_no_view() {
+        assert!(ViewBuffer::new(&[], Vec3::zeros(), 0.01).is_none());
+        let p = [Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.0, 0.0, -1.0)];
+        assert!(ViewBuffer::new(&p, Vec3::zeros(), 0.01).is_none());
+        assert!(ViewBuffer::new(&p[..1], Vec3::zeros(), f64::NAN).is_none());
+        let cfg: Viewpoint = serde_json::from_str("\"auto\"").unwrap();
+        assert_eq!(cfg, Viewpoint::Mode(ViewMode::Auto));
+        let cfg: Viewpoint = serde_json::from_str("[1, 2, 3]").unwrap();
+        assert_eq!(cfg, Viewpoint::Point([1.0, 2.0, 3.0]));
+        assert!(serde_json::from_str::<Viewpoint>("\"sideways\"").is_err());
+    }
+}
