@@ -47,6 +47,10 @@ enum Command {
         /// Override one parameter: section.key=value (repeatable), e.g. membrane.beta=0.8.
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
+        /// Also write the full report (per-iteration η_g, grids and times,
+        /// per-phase times, viewpoint, point counts) as JSON to this file.
+        #[arg(long)]
+        report: Option<PathBuf>,
     },
     /// The 3D separability filter (paper Fig. 6): write the cloud as a PLY
     /// coloured by the separability of the two halves of a cuboid at each point.
@@ -147,7 +151,10 @@ fn main() -> Result<()> {
             output,
             config,
             set,
-        } => commands::reconstruct::run(&input, &output, config.as_deref(), &set),
+            report,
+        } => {
+            commands::reconstruct::run(&input, &output, config.as_deref(), &set, report.as_deref())
+        }
         Command::Filter {
             input,
             output,

@@ -8,7 +8,13 @@ use std::time::Duration;
 
 /// Load `input`, run the membrane with the merged configuration, write `output`
 /// and print one summary line.
-pub fn run(input: &Path, output: &Path, config: Option<&Path>, set: &[String]) -> Result<()> {
+pub fn run(
+    input: &Path,
+    output: &Path,
+    config: Option<&Path>,
+    set: &[String],
+    report: Option<&Path>,
+) -> Result<()> {
     let cfg = Config::load(config, set).context("loading configuration")?;
     let loaded = sepmem::io::load_cloud(input)
         .with_context(|| format!("reading point cloud {}", input.display()))?;
@@ -24,6 +30,10 @@ pub fn run(input: &Path, output: &Path, config: Option<&Path>, set: &[String]) -
     sepmem::io::save_mesh(output, &rec.mesh)
         .with_context(|| format!("writing mesh {}", output.display()))?;
     let r = &rec.report;
+    if let Some(path) = report {
+        let text = serde_json::to_string_pretty(r)?;
+        std::fs::write(path, text).with_context(|| format!("writing report {}", path.display()))?;
+    }
     let t = &r.times;
     println!(
         "{}: points in {} used {} dropped {} (non-finite {}, outliers {}); grid {}x{}; iterations {}; eta_g {:.4}; stop {}; {:.1} ms (prepare {:.1}, init {:.1}, search {:.1}, fit {:.1}, mesh {:.1}) -> {}",

@@ -239,9 +239,11 @@ impl ViewBuffer {
         if n < 8 {
             return Vec::new();
         }
+        // Robust extremes: the 0.2 % and 99.8 % quantiles (a few stray points
+        // do not define the extents; a wide trim would shrink them).
         let quantiles = |mut v: Vec<f64>| -> (f64, f64) {
-            let lo_i = (0.01 * (n - 1) as f64) as usize;
-            let hi_i = (0.99 * (n - 1) as f64) as usize;
+            let lo_i = (0.002 * (n - 1) as f64) as usize;
+            let hi_i = (0.998 * (n - 1) as f64).ceil() as usize;
             let (_, lo, _) = v.select_nth_unstable_by(lo_i, f64::total_cmp);
             let lo = *lo;
             let (_, hi, _) = v.select_nth_unstable_by(hi_i, f64::total_cmp);
