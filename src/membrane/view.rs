@@ -106,7 +106,7 @@ impl ViewBuffer {
             let d = p - eye;
             let r = d.norm();
             let along = d.dot(&dir);
-            if !(r > 0.0) || along < cos_min * r {
+            if r.is_nan() || r <= 0.0 || along < cos_min * r {
                 return None;
             }
             let a = [d.dot(&u) / along, d.dot(&w) / along];
