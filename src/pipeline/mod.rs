@@ -22,6 +22,7 @@
 pub mod align;
 pub mod engine;
 pub mod outputs;
+pub mod score;
 
 use crate::cloud::{PointCloud, Vec3};
 use crate::membrane::{self, Budget, MembraneConfig, MembraneError, Reconstruction, WarmStart};
@@ -71,6 +72,11 @@ pub struct PipelineConfig {
     pub frame_diagnostics_topic: String,
     /// Marker namespace.
     pub marker_namespace: String,
+    /// Samples per mesh queried when replay scores a frame against ground truth.
+    pub score_samples: usize,
+    /// Ground-truth samples within this fraction of the object size of an
+    /// observed point count as seen (visible recall).
+    pub score_visible_radius: f64,
 }
 
 impl Default for PipelineConfig {
@@ -94,6 +100,8 @@ impl Default for PipelineConfig {
             markers_topic: "/sepmem/markers".into(),
             frame_diagnostics_topic: "/sepmem/frame_diagnostics".into(),
             marker_namespace: "sepmem".into(),
+            score_samples: 10_000,
+            score_visible_radius: 0.02,
         }
     }
 }
@@ -456,7 +464,9 @@ impl Tracker {
     }
 }
 
-fn cold_cap(membrane: &MembraneConfig, cfg: &PipelineConfig) -> usize {
+/// Iteration cap of a cold start: `pipeline.cold_max_iterations`, or the
+/// membrane's own `max_iterations` when that is 0.
+pub fn cold_cap(membrane: &MembraneConfig, cfg: &PipelineConfig) -> usize {
     if cfg.cold_max_iterations == 0 {
         membrane.max_iterations.max(1)
     } else {
