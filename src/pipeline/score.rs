@@ -288,3 +288,103 @@ mod tests {
         assert_eq!(s.visible_fraction, 0.0);
     }
 }
+
+/// One frame of one stream of a scored replay ([`replay_scored`]).
+#[derive(Debug, Clone)]
+pub struct ScoredFrame {
+    /// Stream.
+    pub key: super::StreamKey,
+    /// Stamp of the cloud (ns since the epoch).
+    pub stamp_ns: i64,
+    /// Points of the stream in the frame.
+    pub points: usize,
+    /// The pipeline's result (mesh, path, iterations, latency…).
+    pub result: super::FrameResult,
+    /// Score against the ground truth, when the bag has it for this frame.
+    pub score: Option<FrameScore>,
+    /// With `compare_cold`: the cold reference of the same frame (no
+    /// deadline, the cold iteration cap): its iterations and its score.
+    pub cold: Option<(usize, Option<FrameScore>)>,
+}
+
+/// Errors of a scored replay.
+#[derive(Debug, thiserror::Error)]
+pub enum ScoredReplayError {
+    /// Reading the bag failed.
+    #[error(transparent)]
+    Bag(#[from] crate::bag::BagError),
+    /// The ground truth is malformed.
+    #[error(transparent)]
+    Truth(#[from] crate::synth::truth::TruthError),
+    /// A sample did not decode.
+    #[error(transparent)]
+    Sample(#[from] super::engine::SampleError),
+    /// The pipeline failed on a frame.
+    #[error(transparent)]
+    Frame(#[from] super::PipelineError),
+    /// The cold reference failed.
+    #[error("cold reference: {0}")]
+    Cold(#[from] crate::membrane::MembraneError),
+    /// Scoring failed.
+    #[error("scoring: {0}")]
+    Score(#[from] MetricsError),
+}
+
+/// Replay every PointCloud2 of `bag` through the pipeline (one tracker per
+/// stream, as `sepmem replay` does) and score every frame that has ground
+/// truth; with `compare_cold`, also reconstruct each frame cold (untimed).
+///
+/// # Errors
+/// [`ScoredReplayError`] on the first unreadable sample or failed frame.
+pub fn replay_scored(
+    bag: &crate::bag::Bag,
+    cfg: &crate::config::Config,
+    compare_cold: bool,
+) -> Result<Vec<ScoredFrame>, ScoredReplayError> {
+    use super::engine::{decode_sample, Engine};
+    let truth = crate::synth::truth::GroundTruthIndex::from_bag(bag)?;
+    let sc = ScoreConfig::from_config(cfg);
+    let topics: Vec<&str> = bag
+        .topics
+        .iter()
+        .filter(|t| t.type_name == "sensor_msgs/msg/PointCloud2")
+        .map(|t| t.name.as_str())
+        .collect();
+    let mut engine = Engine::new(cfg.membrane.clone(), cfg.pipeline.clone(), cfg.wire.clone());
+    let mut out = Vec::new();
+    for m in bag.read(&topics)? {
+        let sample = decode_sample(&m.topic, &m.data, &cfg.wire, &cfg.pipeline)?;
+        let stamp_ns = sample.header.stamp.to_nanos();
+        for s in &sample.streams {
+            let result = engine.process_ref(s).outcome?;
+            let gt = truth.posed_mesh(&s.key.to_string(), stamp_ns);
+            let score = gt
+                .as_ref()
+                .map(|gt| score_frame(&result.reconstruction.mesh, gt, &s.cloud.points, &sc))
+                .transpose()?;
+            let cold = if compare_cold {
+                let budget = crate::membrane::Budget {
+                    max_iterations: Some(super::cold_cap(&cfg.membrane, &cfg.pipeline)),
+                    deadline: None,
+                };
+                let rec = crate::membrane::reconstruct(&s.cloud, &cfg.membrane, &budget, None)?;
+                let cs = gt
+                    .as_ref()
+                    .map(|gt| score_frame(&rec.mesh, gt, &s.cloud.points, &sc))
+                    .transpose()?;
+                Some((rec.report.iterations, cs))
+            } else {
+                None
+            };
+            out.push(ScoredFrame {
+                key: s.key.clone(),
+                stamp_ns,
+                points: s.cloud.len(),
+                result,
+                score,
+                cold,
+            });
+        }
+    }
+    Ok(out)
+}
