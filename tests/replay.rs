@@ -97,7 +97,7 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
             );
             worst = worst.max(mean / size);
             let cold = first_frame.entry(p.key.clone()).or_insert(mean / size);
-            // Warm frames (6 iterations at most) keep the quality of the
+            // Warm frames (warm_max_iterations, 4) keep the quality of the
             // stream's cold start (up to 60 iterations).
             assert!(
                 mean / size <= *cold + 0.01,

@@ -22,7 +22,7 @@ use sepmem::config::Config;
 use sepmem::membrane::{self, Budget};
 use sepmem::pipeline::engine::{decode_sample, Engine};
 use sepmem::pipeline::score::{score_frame, FrameScore, ScoreConfig};
-use sepmem::pipeline::{cold_cap, outputs, StartPath};
+use sepmem::pipeline::{cold_cap, outputs, thinned, StartPath};
 use sepmem::synth::truth::GroundTruthIndex;
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
@@ -282,10 +282,13 @@ pub fn run_opts(
                             max_iterations: Some(cold_cap(&cfg.membrane, p)),
                             deadline: None,
                         };
-                        let cold = membrane::reconstruct(&sc.cloud, &cfg.membrane, &budget, None)
-                            .with_context(|| {
-                            format!("cold reference of {id} frame {}", r.frame)
-                        })?;
+                        let cold = membrane::reconstruct(
+                            &thinned(&sc.cloud, p),
+                            &cfg.membrane,
+                            &budget,
+                            None,
+                        )
+                        .with_context(|| format!("cold reference of {id} frame {}", r.frame))?;
                         let it_c = cold.report.iterations;
                         let f_cold = match &gt {
                             Some(gt) => {

@@ -367,7 +367,12 @@ pub fn replay_scored(
                     max_iterations: Some(super::cold_cap(&cfg.membrane, &cfg.pipeline)),
                     deadline: None,
                 };
-                let rec = crate::membrane::reconstruct(&s.cloud, &cfg.membrane, &budget, None)?;
+                let rec = crate::membrane::reconstruct(
+                    &super::thinned(&s.cloud, &cfg.pipeline),
+                    &cfg.membrane,
+                    &budget,
+                    None,
+                )?;
                 let cs = gt
                     .as_ref()
                     .map(|gt| score_frame(&rec.mesh, gt, &s.cloud.points, &sc))
