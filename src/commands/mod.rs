@@ -2,5 +2,8 @@
 
 pub mod config;
 pub mod demo;
+pub mod eval;
+pub mod filter;
+pub mod reconstruct;
 pub mod replay;
 pub mod synth;
