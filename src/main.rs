@@ -109,25 +109,7 @@ enum Command {
     /// db3), deterministically and as fast as possible; print a per-frame table
     /// and a latency summary, and optionally write meshes, markers and
     /// diagnostics to an output bag.
-    Replay {
-        /// Input bag: a `.mcap` file, a `.db3` file or a bag directory.
-        bag: PathBuf,
-        /// Output bag (`.mcap` file, or a directory with metadata.yaml).
-        #[arg(short, long)]
-        out: Option<PathBuf>,
-        /// Only replay these topics (repeatable; default: every PointCloud2 topic).
-        #[arg(long)]
-        topic: Vec<String>,
-        /// Configuration file (.json5 or .toml) holding the keys to change.
-        #[arg(long)]
-        config: Option<PathBuf>,
-        /// Override one parameter: section.key=value (repeatable).
-        #[arg(long = "set", value_name = "KEY=VALUE")]
-        set: Vec<String>,
-        /// Print only the summary.
-        #[arg(short, long)]
-        quiet: bool,
-    },
+    Replay(commands::replay::ReplayArgs),
     /// Write a synthetic depth-camera sequence of moving objects (procedural
     /// shapes or mesh files) as a rosbag2 MCAP bag, with per-frame ground
     /// truth on /synth/ground_truth.
@@ -174,17 +156,7 @@ fn main() -> Result<()> {
             let cfg = sepmem::config::Config::load(None, &set)?;
             commands::demo::run(&out, &cfg)
         }
-        Command::Replay {
-            bag,
-            out,
-            topic,
-            config,
-            set,
-            quiet,
-        } => {
-            let cfg = sepmem::config::Config::load(config.as_deref(), &set)?;
-            commands::replay::run(&bag, out.as_deref(), &topic, &cfg, quiet)
-        }
+        Command::Replay(args) => commands::replay::run_args(&args),
         Command::Synth(args) => commands::synth::run(&args),
     }
 }

@@ -97,7 +97,7 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
             );
             worst = worst.max(mean / size);
             let cold = first_frame.entry(p.key.clone()).or_insert(mean / size);
-            // Warm frames (6 iterations at most) keep the quality of the
+            // Warm frames (warm_max_iterations, 4) keep the quality of the
             // stream's cold start (up to 60 iterations).
             assert!(
                 mean / size <= *cold + 0.01,
@@ -174,4 +174,111 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
         );
     }
     let _ = summary;
+}
+
+/// The committed `sepmem synth` fixtures replayed with scoring against their
+/// ground-truth side channel.
+fn scored(file: &str, sets: &[&str]) -> Vec<sepmem::pipeline::score::ScoredFrame> {
+    let bag = Bag::open(&common::data_dir().join("bags").join(file)).unwrap();
+    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    let cfg = Config::load(None, &sets).unwrap();
+    sepmem::pipeline::score::replay_scored(&bag, &cfg, false).unwrap()
+}
+
+#[test]
+fn synth_ellipsoid_frames_score_against_ground_truth_within_the_budget() {
+    // No deadline (machine-independent); the iteration caps are the budget.
+    let frames = scored("synth_ellipsoid.mcap", &["pipeline.deadline_ms=0"]);
+    let cfg = Config::load(None, &[]).unwrap();
+    let (warm_cap, cold_cap) = (
+        cfg.pipeline.warm_max_iterations,
+        sepmem::pipeline::cold_cap(&cfg.membrane, &cfg.pipeline),
+    );
+    assert_eq!(frames.len(), 12);
+    let (mut warm_it, mut cold_it) = (Vec::new(), Vec::new());
+    for f in &frames {
+        let r = &f.result;
+        let s = f.score.expect("every synth frame has ground truth");
+        eprintln!(
+            "frame {} {:?} {} it: F {:.3} P {:.3} R_vis {:.3} CD {:.4} depth {:.2} volume {:.2}",
+            r.frame,
+            r.path,
+            r.iterations,
+            s.fscore,
+            s.precision,
+            s.recall_visible,
+            s.chamfer_l1,
+            s.depth_ratio,
+            s.volume_ratio
+        );
+        assert!(r.reconstruction.mesh.topology().is_watertight());
+        // Measured at the time of writing (Kinect noise, 1 % outliers, 2 500
+        // points): P 0.97–1.00, R_vis 0.79–0.85, F 0.48–0.51 (the unseen
+        // back is not recovered, see tests/partial_view.rs).
+        assert!(s.precision >= 0.9, "frame {}: precision {s:?}", r.frame);
+        assert!(s.recall_visible >= 0.7, "frame {}: {s:?}", r.frame);
+        assert!(s.fscore >= 0.4, "frame {}: {s:?}", r.frame);
+        match (r.path, r.reason) {
+            (StartPath::Warm, _) => {
+                assert!(r.iterations <= warm_cap, "frame {}", r.frame);
+                warm_it.push(r.iterations);
+            }
+            (StartPath::Cold, PathReason::FirstFrame) => {
+                assert!(r.iterations <= cold_cap);
+                cold_it.push(r.iterations);
+            }
+            (StartPath::Cold, _) => assert!(r.iterations <= warm_cap + cold_cap),
+        }
+    }
+    assert!(warm_it.len() >= 10, "{} warm frames", warm_it.len());
+    let (max_warm, min_cold) = (
+        warm_it.iter().max().copied().unwrap(),
+        cold_it.iter().min().copied().unwrap(),
+    );
+    assert!(
+        max_warm < min_cold,
+        "warm frames took up to {max_warm} iterations, a cold start {min_cold}"
+    );
+}
+
+#[test]
+fn an_expired_deadline_stops_every_frame_before_its_first_iteration() {
+    // A deadline that has passed before the membrane starts iterating: every
+    // attempt (warm, and the cold fallback) must stop at once and still
+    // return a watertight mesh. Independent of the machine's speed.
+    let frames = scored(
+        "synth_ellipsoid.mcap",
+        &["pipeline.deadline_ms=0.000001", "pipeline.warm_eta_ratio=0"],
+    );
+    assert_eq!(frames.len(), 12);
+    for f in &frames {
+        let r = &f.result;
+        assert_eq!(r.iterations, 0, "frame {}", r.frame);
+        assert_eq!(
+            r.reconstruction.report.stop,
+            sepmem::membrane::StopReason::Deadline
+        );
+        assert!(r.reconstruction.mesh.topology().is_watertight());
+        if r.frame > 0 {
+            assert_eq!(r.path, StartPath::Warm);
+        }
+    }
+}
+
+#[test]
+#[ignore = "known failure: the membrane blows the bottle of synth_two_labelled up to \
+            ~1 m (F < 0.02) and scores the torus F 0.04-0.3; see the issue-4 report"]
+fn synth_two_labelled_frames_score_against_ground_truth() {
+    let frames = scored("synth_two_labelled.mcap", &["pipeline.deadline_ms=0"]);
+    assert_eq!(frames.len(), 24);
+    for f in &frames {
+        let s = f.score.unwrap();
+        eprintln!("{} frame {}: {s:?}", f.key, f.result.frame);
+        assert!(
+            s.precision >= 0.8 && s.recall_visible >= 0.7,
+            "{} frame {}: {s:?}",
+            f.key,
+            f.result.frame
+        );
+    }
 }

@@ -1,15 +1,99 @@
 //! `sepmem replay`: run the frame pipeline over every PointCloud2 of a bag,
 //! deterministically, with no network, as fast as possible.
+//!
+//! When the bag carries ground truth (`sepmem_msgs/msg/GroundTruth`, as
+//! written by `sepmem synth`), every frame of every stream is scored against
+//! the posed ground-truth mesh ([`sepmem::pipeline::score`]): F-score,
+//! Chamfer-L1, precision against the full surface, recall on the part the
+//! camera saw, and the closure of the unseen side (extent along the viewing
+//! ray); the summary gives per-stream means and minima.
+//!
+//! `--compare-cold` also reconstructs every frame from a cold start (no
+//! deadline, the cold iteration cap) outside the timed pipeline, and reports
+//! per warm frame ΔF = F_cold − F_warm and the ratio of warm to cold
+//! iterations: the acceptance check (ΔF ≤ 0.01 with at most a
+//! quarter of the cold iterations).
 
 use anyhow::{bail, Context, Result};
+use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use sepmem::bag::{Bag, BagWriter};
 use sepmem::config::Config;
-use sepmem::pipeline::engine::Engine;
-use sepmem::pipeline::outputs;
-use sepmem::pipeline::StartPath;
+use sepmem::membrane::{self, Budget};
+use sepmem::pipeline::engine::{decode_sample, Engine};
+use sepmem::pipeline::score::{score_frame, FrameScore, ScoreConfig};
+use sepmem::pipeline::{cold_cap, outputs, thinned, StartPath};
+use sepmem::synth::truth::GroundTruthIndex;
+use std::collections::BTreeMap;
 use std::io::IsTerminal;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `sepmem replay`.
+#[derive(Args, Debug)]
+pub struct ReplayArgs {
+    /// Input bag: a `.mcap` file, a `.db3` file or a bag directory.
+    pub bag: PathBuf,
+    /// Output bag (`.mcap` file, or a directory with metadata.yaml).
+    #[arg(short, long)]
+    pub out: Option<PathBuf>,
+    /// Only replay these topics (repeatable; default: every PointCloud2 topic).
+    #[arg(long)]
+    pub topic: Vec<String>,
+    /// Configuration file (.json5 or .toml) holding the keys to change.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Override one parameter: section.key=value (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Do not score frames against the bag's ground truth.
+    #[arg(long)]
+    pub no_score: bool,
+    /// Also reconstruct every frame cold (untimed) and report, per warm
+    /// frame, ΔF = F_cold − F_warm and the warm/cold iteration ratio.
+    #[arg(long)]
+    pub compare_cold: bool,
+    /// Print only the summary.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+/// Run `sepmem replay` from its arguments.
+pub fn run_args(a: &ReplayArgs) -> Result<()> {
+    let cfg = Config::load(a.config.as_deref(), &a.set)?;
+    run_opts(
+        &a.bag,
+        Outputs {
+            bag: a.out.as_deref(),
+            meshes: None,
+        },
+        &a.topic,
+        &cfg,
+        Options {
+            quiet: a.quiet,
+            score: !a.no_score,
+            compare_cold: a.compare_cold,
+        },
+    )
+}
+
+/// What a replay computes and prints besides the pipeline itself.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Options {
+    /// Print only the summary.
+    pub quiet: bool,
+    /// Score frames against the bag's ground truth, when it has some.
+    pub score: bool,
+    /// Reconstruct every frame cold too and compare (needs ground truth for ΔF).
+    pub compare_cold: bool,
+}
+
+/// Per-stream accumulators of the summary.
+#[derive(Debug, Default)]
+struct StreamSummary {
+    scores: Vec<FrameScore>,
+    /// (ΔF, warm/cold iteration ratio) of warm frames.
+    warm_vs_cold: Vec<(f64, f64)>,
+}
 
 const POINTCLOUD2: &str = "sensor_msgs/msg/PointCloud2";
 
@@ -22,26 +106,6 @@ pub fn percentile(sorted: &[f64], q: f64) -> f64 {
     sorted[rank - 1]
 }
 
-/// Replay `bag`, optionally writing an output bag and restricting topics.
-pub fn run(
-    bag_path: &Path,
-    out: Option<&Path>,
-    topics: &[String],
-    cfg: &Config,
-    quiet: bool,
-) -> Result<()> {
-    run_with(
-        bag_path,
-        Outputs {
-            bag: out,
-            meshes: None,
-        },
-        topics,
-        cfg,
-        quiet,
-    )
-}
-
 /// Where a replay writes its results.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Outputs<'a> {
@@ -51,7 +115,7 @@ pub struct Outputs<'a> {
     pub meshes: Option<&'a Path>,
 }
 
-/// Replay `bag` into the given outputs.
+/// Replay `bag` into the given outputs (scoring frames when the bag has ground truth).
 pub fn run_with(
     bag_path: &Path,
     outputs_to: Outputs<'_>,
@@ -59,6 +123,28 @@ pub fn run_with(
     cfg: &Config,
     quiet: bool,
 ) -> Result<()> {
+    run_opts(
+        bag_path,
+        outputs_to,
+        topics,
+        cfg,
+        Options {
+            quiet,
+            score: true,
+            compare_cold: false,
+        },
+    )
+}
+
+/// Replay `bag` into the given outputs with the given options.
+pub fn run_opts(
+    bag_path: &Path,
+    outputs_to: Outputs<'_>,
+    topics: &[String],
+    cfg: &Config,
+    opts: Options,
+) -> Result<()> {
+    let quiet = opts.quiet;
     let out = outputs_to.bag;
     if let Some(dir) = outputs_to.meshes {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -83,6 +169,15 @@ pub fn run_with(
         );
     }
     let messages = bag.read(&cloud_topics)?;
+    let truth = if opts.score || opts.compare_cold {
+        GroundTruthIndex::from_bag(&bag)
+            .with_context(|| format!("reading ground truth of {}", bag_path.display()))?
+    } else {
+        GroundTruthIndex::default()
+    };
+    let scored = !truth.is_empty();
+    let score_cfg = ScoreConfig::from_config(cfg);
+    let mut per_stream: BTreeMap<String, StreamSummary> = BTreeMap::new();
     let mut writer = out
         .map(|p| {
             BagWriter::create(p).with_context(|| format!("creating output bag {}", p.display()))
@@ -106,15 +201,25 @@ pub fn run_with(
             bar.suspend(|| println!("{line}"));
         }
     };
-    print(format!(
+    let mut header = format!(
         "{:<32} {:>5} {:>7} {:<5} {:<22} {:>4} {:>6} {:>8}",
         "stream", "frame", "points", "path", "reason", "it", "eta_g", "ms"
-    ));
+    );
+    if scored {
+        header += &format!(
+            " {:>6} {:>6} {:>6} {:>7} {:>5}",
+            "F", "P", "R_vis", "CD", "depth"
+        );
+    }
+    if opts.compare_cold {
+        header += &format!(" {:>7} {:>4} {:>7} {:>5}", "F_cold", "it_c", "dF", "ratio");
+    }
+    print(header);
     let (mut latencies, mut warm_it, mut cold_it) = (Vec::new(), Vec::new(), Vec::new());
     let (mut bad_samples, mut failed) = (0usize, 0usize);
     for m in &messages {
         bar.inc(1);
-        let (sample, processed) = match engine.handle(&m.topic, &m.data) {
+        let mut sample = match decode_sample(&m.topic, &m.data, &engine.limits, &engine.pipeline) {
             Ok(x) => x,
             Err(e) => {
                 bad_samples += 1;
@@ -122,8 +227,11 @@ pub fn run_with(
                 continue;
             }
         };
+        let streams = std::mem::take(&mut sample.streams);
+        let processed: Vec<_> = streams.iter().map(|s| engine.process_ref(s)).collect();
+        let stamp = sample.header.stamp.to_nanos();
         let mut ok = Vec::new();
-        for pr in &processed {
+        for (sc, pr) in streams.iter().zip(&processed) {
             match &pr.outcome {
                 Ok(r) => {
                     latencies.push(r.latency_ms);
@@ -131,9 +239,18 @@ pub fn run_with(
                         StartPath::Warm => warm_it.push(r.iterations as f64),
                         StartPath::Cold => cold_it.push(r.iterations as f64),
                     }
-                    print(format!(
+                    let id = pr.key.to_string();
+                    let gt = truth.posed_mesh(&id, stamp);
+                    let score = match &gt {
+                        Some(gt) => Some(
+                            score_frame(&r.reconstruction.mesh, gt, &sc.cloud.points, &score_cfg)
+                                .with_context(|| format!("scoring {id} frame {}", r.frame))?,
+                        ),
+                        None => None,
+                    };
+                    let mut line = format!(
                         "{:<32} {:>5} {:>7} {:<5} {:<22} {:>4} {:>6.3} {:>8.1}",
-                        pr.key.to_string(),
+                        id,
                         r.frame,
                         pr.points,
                         if r.path == StartPath::Warm {
@@ -145,7 +262,48 @@ pub fn run_with(
                         r.iterations,
                         r.reconstruction.report.eta_final,
                         r.latency_ms
-                    ));
+                    );
+                    let entry = per_stream.entry(id.clone()).or_default();
+                    if let Some(sc) = &score {
+                        entry.scores.push(*sc);
+                        line += &format!(
+                            " {:>6.3} {:>6.3} {:>6.3} {:>7.4} {:>5.2}",
+                            sc.fscore,
+                            sc.precision,
+                            sc.recall_visible,
+                            sc.chamfer_l1,
+                            sc.depth_ratio
+                        );
+                    } else if scored {
+                        line += &format!(" {:>6} {:>6} {:>6} {:>7} {:>5}", "-", "-", "-", "-", "-");
+                    }
+                    if opts.compare_cold {
+                        let budget = Budget {
+                            max_iterations: Some(cold_cap(&cfg.membrane, p)),
+                            deadline: None,
+                        };
+                        let cold = membrane::reconstruct(
+                            &thinned(&sc.cloud, p),
+                            &cfg.membrane,
+                            &budget,
+                            None,
+                        )
+                        .with_context(|| format!("cold reference of {id} frame {}", r.frame))?;
+                        let it_c = cold.report.iterations;
+                        let f_cold = match &gt {
+                            Some(gt) => {
+                                score_frame(&cold.mesh, gt, &sc.cloud.points, &score_cfg)?.fscore
+                            }
+                            None => f64::NAN,
+                        };
+                        let df = f_cold - score.map_or(f64::NAN, |s| s.fscore);
+                        let ratio = r.iterations as f64 / it_c.max(1) as f64;
+                        if r.path == StartPath::Warm {
+                            entry.warm_vs_cold.push((df, ratio));
+                        }
+                        line += &format!(" {f_cold:>7.3} {it_c:>4} {df:>+7.3} {ratio:>5.2}");
+                    }
+                    print(line);
                     if let Some(dir) = outputs_to.meshes {
                         let name = format!(
                             "{}_{:04}.ply",
@@ -192,13 +350,6 @@ pub fn run_with(
     }
     bar.finish_and_clear();
     latencies.sort_by(f64::total_cmp);
-    let mean = |v: &[f64]| {
-        if v.is_empty() {
-            f64::NAN
-        } else {
-            v.iter().sum::<f64>() / v.len() as f64
-        }
-    };
     println!(
         "summary: {} samples, {} frames ok ({} warm, {} cold), {} failed, {} bad samples; latency ms p50 {:.1} p95 {:.1} max {:.1}; mean iterations warm {:.1} cold {:.1}",
         messages.len(),
@@ -213,6 +364,47 @@ pub fn run_with(
         mean(&warm_it),
         mean(&cold_it),
     );
+    for (id, st) in &per_stream {
+        if !st.scores.is_empty() {
+            let f: Vec<f64> = st.scores.iter().map(|s| s.fscore).collect();
+            let pick = |g: fn(&FrameScore) -> f64| st.scores.iter().map(g).collect::<Vec<_>>();
+            println!(
+                "score {id}: {} frames; F mean {:.3} min {:.3}; precision mean {:.3} min {:.3}; visible recall mean {:.3} min {:.3}; Chamfer-L1 mean {:.4}; depth ratio min {:.2} max {:.2}; volume ratio min {:.2} max {:.2} (tau {}, {} samples)",
+                f.len(),
+                mean(&f),
+                min(&f),
+                mean(&pick(|s| s.precision)),
+                min(&pick(|s| s.precision)),
+                mean(&pick(|s| s.recall_visible)),
+                min(&pick(|s| s.recall_visible)),
+                mean(&pick(|s| s.chamfer_l1)),
+                min(&pick(|s| s.depth_ratio)),
+                max(&pick(|s| s.depth_ratio)),
+                min(&pick(|s| s.volume_ratio)),
+                max(&pick(|s| s.volume_ratio)),
+                score_cfg.tau,
+                score_cfg.samples,
+            );
+        }
+        if opts.compare_cold && !st.warm_vs_cold.is_empty() {
+            let df: Vec<f64> = st.warm_vs_cold.iter().map(|x| x.0).collect();
+            let ratio: Vec<f64> = st.warm_vs_cold.iter().map(|x| x.1).collect();
+            let pass = st
+                .warm_vs_cold
+                .iter()
+                .filter(|(d, r)| *d <= 0.01 && *r <= 0.25)
+                .count();
+            println!(
+                "warm vs cold {id}: {} warm frames; dF = F_cold - F_warm mean {:+.4} max {:+.4}; iteration ratio mean {:.3} max {:.3}; {pass}/{} warm frames within dF <= 0.01 at <= 1/4 of the cold iterations",
+                df.len(),
+                mean(&df),
+                max(&df),
+                mean(&ratio),
+                max(&ratio),
+                df.len(),
+            );
+        }
+    }
     if let Some(w) = writer {
         let s = w.finish()?;
         println!(
@@ -222,4 +414,20 @@ pub fn run_with(
         );
     }
     Ok(())
+}
+
+fn mean(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+fn min(v: &[f64]) -> f64 {
+    v.iter().copied().fold(f64::NAN, f64::min)
+}
+
+fn max(v: &[f64]) -> f64 {
+    v.iter().copied().fold(f64::NAN, f64::max)
 }

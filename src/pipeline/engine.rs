@@ -148,13 +148,19 @@ impl Engine {
 
     /// Process one stream's cloud.
     pub fn process(&mut self, s: StreamCloud) -> Processed {
+        self.process_ref(&s)
+    }
+
+    /// Process one stream's cloud, leaving it to the caller (e.g. to score
+    /// the result against the points afterwards).
+    pub fn process_ref(&mut self, s: &StreamCloud) -> Processed {
         let tracker = self
             .trackers
             .entry(s.key.clone())
             .or_insert_with(|| Tracker::new(s.key.clone()));
         let outcome = tracker.process(&s.cloud, &self.membrane, &self.pipeline);
         Processed {
-            key: s.key,
+            key: s.key.clone(),
             points: s.cloud.len(),
             outcome,
         }

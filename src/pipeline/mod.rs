@@ -2,7 +2,8 @@
 //! warm-started frame to frame under a per-frame budget.
 //!
 //! For every frame of a stream the [`Tracker`]:
-//! 1. validates the decoded cloud (too few points → skipped, counted);
+//! 1. validates the decoded cloud (too few points → skipped, counted) and
+//!    thins it to about `max_points` points when it has more ([`thinned`]);
 //! 2. decides the start path: **warm** from the previous frame's surface when
 //!    there is one and the object did not jump or change size beyond the
 //!    configured bounds, **cold** (the paper's six-extreme-point octagon,
@@ -18,15 +19,19 @@
 //!    frame's (the warm start "failed"), and reports which path it took and why.
 //!
 //! Streams never share state, so an error in one cannot affect another.
+//! Replays of bags with ground truth are scored frame by frame with
+//! [`score`].
 
 pub mod align;
 pub mod engine;
 pub mod outputs;
+pub mod score;
 
 use crate::cloud::{PointCloud, Vec3};
 use crate::membrane::{self, Budget, MembraneConfig, MembraneError, Reconstruction, WarmStart};
 use crate::spline::ClosedSurface;
 use serde::{Deserialize, Serialize};
+use std::borrow::Cow;
 use std::fmt;
 use std::time::{Duration, Instant};
 use thiserror::Error;
@@ -43,6 +48,8 @@ pub struct PipelineConfig {
     pub ignore_labels: Vec<i64>,
     /// Frames (or label segments) with fewer points are skipped and counted.
     pub min_points: usize,
+    /// Larger clouds are thinned to about this many points before the membrane (0: never).
+    pub max_points: usize,
     /// Start each frame from the previous frame's surface when possible.
     pub warm_start: bool,
     /// Iteration cap for a warm-started frame.
@@ -71,6 +78,11 @@ pub struct PipelineConfig {
     pub frame_diagnostics_topic: String,
     /// Marker namespace.
     pub marker_namespace: String,
+    /// Samples per mesh queried when replay scores a frame against ground truth.
+    pub score_samples: usize,
+    /// Ground-truth samples within this fraction of the object size of an
+    /// observed point count as seen (visible recall).
+    pub score_visible_radius: f64,
 }
 
 impl Default for PipelineConfig {
@@ -80,8 +92,9 @@ impl Default for PipelineConfig {
             label_channel: "label".into(),
             ignore_labels: vec![0],
             min_points: 50,
+            max_points: 5_000,
             warm_start: true,
-            warm_max_iterations: 6,
+            warm_max_iterations: 4,
             cold_max_iterations: 0,
             deadline_ms: 40.0,
             max_motion: 0.5,
@@ -94,6 +107,8 @@ impl Default for PipelineConfig {
             markers_topic: "/sepmem/markers".into(),
             frame_diagnostics_topic: "/sepmem/frame_diagnostics".into(),
             marker_namespace: "sepmem".into(),
+            score_samples: 10_000,
+            score_visible_radius: 0.02,
         }
     }
 }
@@ -326,6 +341,7 @@ impl Tracker {
                 min: cfg.min_points.max(4),
             });
         }
+        let cloud = &*thinned(cloud, cfg);
         let deadline =
             (cfg.deadline_ms > 0.0).then(|| start + Duration::from_secs_f64(cfg.deadline_ms / 1e3));
         let centroid = cloud.centroid().unwrap_or_else(Vec3::zeros);
@@ -456,10 +472,71 @@ impl Tracker {
     }
 }
 
-fn cold_cap(membrane: &MembraneConfig, cfg: &PipelineConfig) -> usize {
+/// The cloud the membrane gets: `cloud` itself, or about
+/// `pipeline.max_points` of its points when it has more, picked by a
+/// multiplicative hash of the point index (deterministic, and without the
+/// stripes a fixed stride leaves in an organised, row-major cloud).
+pub fn thinned<'a>(cloud: &'a PointCloud, cfg: &PipelineConfig) -> Cow<'a, PointCloud> {
+    if cfg.max_points == 0 || cloud.len() <= cfg.max_points {
+        return Cow::Borrowed(cloud);
+    }
+    let keep = cfg.max_points as f64 / cloud.len() as f64;
+    let idx: Vec<usize> = (0..cloud.len())
+        .filter(|&i| {
+            let h = (i as u64 ^ 0x5851_F42D_4C95_7F2D).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11;
+            (h as f64) < keep * (1u64 << 53) as f64
+        })
+        .collect();
+    Cow::Owned(cloud.select(&idx))
+}
+
+/// Iteration cap of a cold start: `pipeline.cold_max_iterations`, or the
+/// membrane's own `max_iterations` when that is 0.
+pub fn cold_cap(membrane: &MembraneConfig, cfg: &PipelineConfig) -> usize {
     if cfg.cold_max_iterations == 0 {
         membrane.max_iterations.max(1)
     } else {
         cfg.cold_max_iterations
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thinning_keeps_about_max_points_spread_over_the_whole_cloud() {
+        // An organised 200×100 "image" of points, row-major.
+        let points: Vec<Vec3> = (0..20_000)
+            .map(|i| Vec3::new((i % 200) as f64, (i / 200) as f64, 1.0))
+            .collect();
+        let cloud = PointCloud::from_points(points);
+        let cfg = PipelineConfig {
+            max_points: 5_000,
+            ..PipelineConfig::default()
+        };
+        let t = thinned(&cloud, &cfg);
+        assert!((4_700..=5_300).contains(&t.len()), "{} points", t.len());
+        // No stripes: every column and every row keeps some points.
+        let mut cols = [0usize; 200];
+        let mut rows = [0usize; 100];
+        for p in &t.points {
+            cols[p.x as usize] += 1;
+            rows[p.y as usize] += 1;
+        }
+        assert!(cols.iter().all(|&c| (10..=45).contains(&c)), "{cols:?}");
+        assert!(rows.iter().all(|&r| (25..=80).contains(&r)), "{rows:?}");
+        // Deterministic; small clouds and max_points = 0 are left alone.
+        assert_eq!(thinned(&cloud, &cfg).points, t.points);
+        let off = PipelineConfig {
+            max_points: 0,
+            ..cfg.clone()
+        };
+        assert!(matches!(thinned(&cloud, &off), Cow::Borrowed(_)));
+        let big = PipelineConfig {
+            max_points: 20_000,
+            ..cfg
+        };
+        assert!(matches!(thinned(&cloud, &big), Cow::Borrowed(_)));
     }
 }

@@ -1,0 +1,84 @@
+//! Partial views: a depth camera sees one side of each object, the normal
+//! case on a robot. Sequences made by `sepmem synth` are replayed through the
+//! pipeline and every frame is scored against the full ground-truth surface
+//! ([`sepmem::pipeline::score`]): precision (nothing invented, against the
+//! whole surface), recall on the part the camera saw, and the closure of the
+//! unseen side (extent along the viewing ray and enclosed volume relative to
+//! the ground truth's: a membrane collapsed onto the visible shell has a
+//! volume ratio near 0, one blown up far above 1).
+#![allow(clippy::unwrap_used)]
+
+use sepmem::bag::Bag;
+use sepmem::config::Config;
+use sepmem::pipeline::score::{replay_scored, ScoredFrame};
+use sepmem::synth::sequence::{write_sequence, SequenceSpec};
+use sepmem::synth::Noise;
+
+fn replay(shapes: &[&str], frames: usize) -> Vec<ScoredFrame> {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("partial.mcap");
+    let spec = SequenceSpec {
+        shapes: shapes.iter().map(|s| s.to_string()).collect(),
+        frames,
+        points_per_object: 3_000,
+        noise: Noise::kinect(),
+        mesh_resolution: 24,
+        seed: 11,
+        ..SequenceSpec::default()
+    };
+    write_sequence(&spec, &path, |_| {}).unwrap();
+    let bag = Bag::open(&path).unwrap();
+    let cfg = Config::load(None, &["pipeline.deadline_ms=0".into()]).unwrap();
+    let out = replay_scored(&bag, &cfg, false).unwrap();
+    for f in &out {
+        let s = f.score.unwrap();
+        eprintln!(
+            "{} frame {} ({:?}, {} it): F {:.3} P {:.3} R_vis {:.3} (seen {:.2}) depth {:.2} volume {:.2}",
+            f.key,
+            f.result.frame,
+            f.result.path,
+            f.result.iterations,
+            s.fscore,
+            s.precision,
+            s.recall_visible,
+            s.visible_fraction,
+            s.depth_ratio,
+            s.volume_ratio
+        );
+    }
+    out
+}
+
+#[test]
+fn the_camera_sees_about_half_of_each_object_and_the_visible_side_is_recovered() {
+    let frames = replay(&["sphere"], 3);
+    assert_eq!(frames.len(), 3);
+    for f in &frames {
+        let s = f.score.unwrap();
+        // One side seen: between a third and two thirds of the surface.
+        assert!((0.3..0.7).contains(&s.visible_fraction), "{s:?}");
+        // Measured at the time of writing: P 0.99–1.00, R_vis 0.76–0.78.
+        assert!(s.precision >= 0.9, "frame {}: {s:?}", f.result.frame);
+        assert!(s.recall_visible >= 0.65, "frame {}: {s:?}", f.result.frame);
+        assert!(f.result.reconstruction.mesh.topology().is_watertight());
+    }
+}
+
+#[test]
+#[ignore = "known failure (membrane): the inward force treats the unseen back as \
+            empty space and folds it onto the visible shell (sphere: depth ratio 0.3, \
+            volume ratio 0.00), or the surface balloons (bottle: ×7); see the issue-4 report"]
+fn the_unseen_side_stays_a_plausible_closure() {
+    let frames = replay(&["sphere", "ellipsoid", "rounded_box", "bottle"], 3);
+    assert_eq!(frames.len(), 12);
+    for f in &frames {
+        let s = f.score.unwrap();
+        let at = format!("{} frame {}: {s:?}", f.key, f.result.frame);
+        assert!(s.precision >= 0.8, "{at}");
+        assert!(s.recall_visible >= 0.7, "{at}");
+        // The back is closed at a plausible depth: neither collapsed onto the
+        // visible shell (ratio ≈ 0.5 in depth, ≈ 0 in volume) nor blown up.
+        assert!((0.75..=1.3).contains(&s.depth_ratio), "{at}");
+        assert!((0.5..=1.5).contains(&s.volume_ratio), "{at}");
+    }
+}
