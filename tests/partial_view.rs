@@ -14,7 +14,7 @@ use sepmem::pipeline::score::{replay_scored, ScoredFrame};
 use sepmem::synth::sequence::{write_sequence, SequenceSpec};
 use sepmem::synth::Noise;
 
-fn replay(shapes: &[&str], frames: usize) -> Vec<ScoredFrame> {
+fn replay(shapes: &[&str], frames: usize, sets: &[&str]) -> Vec<ScoredFrame> {
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("partial.mcap");
     let spec = SequenceSpec {
@@ -28,7 +28,9 @@ fn replay(shapes: &[&str], frames: usize) -> Vec<ScoredFrame> {
     };
     write_sequence(&spec, &path, |_| {}).unwrap();
     let bag = Bag::open(&path).unwrap();
-    let cfg = Config::load(None, &["pipeline.deadline_ms=0".into()]).unwrap();
+    let mut sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    sets.push("pipeline.deadline_ms=0".into());
+    let cfg = Config::load(None, &sets).unwrap();
     let out = replay_scored(&bag, &cfg, false).unwrap();
     for f in &out {
         let s = f.score.unwrap();
@@ -51,33 +53,56 @@ fn replay(shapes: &[&str], frames: usize) -> Vec<ScoredFrame> {
 
 #[test]
 fn the_camera_sees_about_half_of_each_object_and_the_visible_side_is_recovered() {
-    let frames = replay(&["sphere"], 3);
+    let frames = replay(&["sphere"], 3, &[]);
     assert_eq!(frames.len(), 3);
     for f in &frames {
         let s = f.score.unwrap();
         // One side seen: between a third and two thirds of the surface.
         assert!((0.3..0.7).contains(&s.visible_fraction), "{s:?}");
-        // Measured at the time of writing: P 0.99–1.00, R_vis 0.76–0.78.
-        assert!(s.precision >= 0.9, "frame {}: {s:?}", f.result.frame);
-        assert!(s.recall_visible >= 0.65, "frame {}: {s:?}", f.result.frame);
+        // Measured at the time of writing: R_vis 0.87–0.88 (0.77 before the
+        // viewpoint of membrane/view.rs), P 0.56–0.57 (the back is held, not
+        // measured), volume ratio 0.35 (0.00 before).
+        assert!(s.recall_visible >= 0.8, "frame {}: {s:?}", f.result.frame);
+        assert!(s.precision >= 0.45, "frame {}: {s:?}", f.result.frame);
+        assert!(s.volume_ratio >= 0.25, "frame {}: {s:?}", f.result.frame);
         assert!(f.result.reconstruction.mesh.topology().is_watertight());
     }
 }
 
 #[test]
-#[ignore = "known failure (membrane): the inward force treats the unseen back as \
-            empty space and folds it onto the visible shell (sphere: depth ratio 0.3, \
-            volume ratio 0.00), or the surface balloons (bottle: ×7); see the issue-4 report"]
 fn the_unseen_side_stays_a_plausible_closure() {
-    let frames = replay(&["sphere", "ellipsoid", "rounded_box", "bottle"], 3);
-    assert_eq!(frames.len(), 12);
+    // Measured at the time of writing (3 frames each): depth ratio
+    // 0.89–0.90 / 1.12–1.19 / 1.11–1.19, volume ratio 0.81–0.83 / 1.18–1.26 /
+    // 1.21–1.28, P 0.44–0.53, R_vis 0.94–1.00 for sphere / ellipsoid /
+    // rounded box. Before membrane/view.rs the back folded onto the visible
+    // shell (volume ratio 0.00).
+    // With the mirror completion of the unseen side (membrane.view_completion).
+    let frames = replay(
+        &["sphere", "ellipsoid", "rounded_box"],
+        3,
+        &["membrane.view_completion=true"],
+    );
+    assert_eq!(frames.len(), 9);
     for f in &frames {
         let s = f.score.unwrap();
         let at = format!("{} frame {}: {s:?}", f.key, f.result.frame);
-        assert!(s.precision >= 0.8, "{at}");
-        assert!(s.recall_visible >= 0.7, "{at}");
+        assert!(s.precision >= 0.35, "{at}");
+        assert!(s.recall_visible >= 0.9, "{at}");
         // The back is closed at a plausible depth: neither collapsed onto the
         // visible shell (ratio ≈ 0.5 in depth, ≈ 0 in volume) nor blown up.
+        assert!((0.75..=1.3).contains(&s.depth_ratio), "{at}");
+        assert!((0.6..=1.5).contains(&s.volume_ratio), "{at}");
+    }
+}
+
+#[test]
+#[ignore = "known failure (membrane): a bottle seen end-on (neck toward the camera) \
+            is dense at the neck and sparse on its grazing sides, so the global δ \
+            rejects most boundaries; depth ratio 1.8–2.0, volume ratio 0.5–4.1"]
+fn a_bottle_seen_end_on_stays_a_plausible_closure() {
+    for f in &replay(&["bottle"], 3, &["membrane.view_completion=true"]) {
+        let s = f.score.unwrap();
+        let at = format!("{} frame {}: {s:?}", f.key, f.result.frame);
         assert!((0.75..=1.3).contains(&s.depth_ratio), "{at}");
         assert!((0.5..=1.5).contains(&s.volume_ratio), "{at}");
     }

@@ -22,6 +22,11 @@ use sepmem::wire::{convert, decode};
 /// label 20), whose flat faces and sharp edges the membrane still rounds off.
 const MAX_SCAN_TO_MESH: f64 = 0.1;
 
+/// Longest bounding-box edge of a mesh's vertices.
+fn mesh_extent(mesh: &sepmem::mesh::TriMesh) -> f64 {
+    sepmem::cloud::Aabb::from_points(&mesh.vertices).longest_edge()
+}
+
 #[test]
 fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
     let bag = Bag::open(&common::data_dir().join("bags/mosd_rosbags")).unwrap();
@@ -87,20 +92,33 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
                 })
                 .sum::<f64>()
                 / cloud.len() as f64;
+            // Nor is it blown up (before membrane/view.rs the cereal box came
+            // out ~1.5 m across for a 0.2 m scan). Measured now: up to 2.5×
+            // for the cereal box (its completed back is deeper than its
+            // visible faces, and a box-shaped start surface converges slowly).
+            let grow = mesh_extent(mesh) / size;
             eprintln!(
-                "{} frame {} ({:?}, {} it): scan-to-mesh mean {:.4} of the object size",
+                "{} frame {} ({:?}, {} it): scan-to-mesh mean {:.4} of the object size, extent ratio {:.2}",
                 p.key,
                 r.frame,
                 r.path,
                 r.iterations,
-                mean / size
+                mean / size,
+                grow
+            );
+            assert!(
+                grow <= 3.0,
+                "{} frame {}: mesh {grow:.2}× the scan",
+                p.key,
+                r.frame
             );
             worst = worst.max(mean / size);
             let cold = first_frame.entry(p.key.clone()).or_insert(mean / size);
-            // Warm frames (warm_max_iterations, 4) keep the quality of the
-            // stream's cold start (up to 60 iterations).
+            // Later frames (warm, or a cold redo) keep the quality of the
+            // stream's first cold start (measured: within 0.021, test31#30
+            // frame 1 redone cold).
             assert!(
-                mean / size <= *cold + 0.01,
+                mean / size <= *cold + 0.03,
                 "{} frame {}: warm {:.4} worse than cold {:.4}",
                 p.key,
                 r.frame,
@@ -213,11 +231,18 @@ fn synth_ellipsoid_frames_score_against_ground_truth_within_the_budget() {
         );
         assert!(r.reconstruction.mesh.topology().is_watertight());
         // Measured at the time of writing (Kinect noise, 1 % outliers, 2 500
-        // points): P 0.97–1.00, R_vis 0.79–0.85, F 0.48–0.51 (the unseen
-        // back is not recovered, see tests/partial_view.rs).
-        assert!(s.precision >= 0.9, "frame {}: precision {s:?}", r.frame);
-        assert!(s.recall_visible >= 0.7, "frame {}: {s:?}", r.frame);
+        // points): P 0.53–0.55, R_vis 0.87–0.90, F 0.44–0.47, volume ratio
+        // 0.55–0.60: the viewpoint (membrane/view.rs) keeps the unseen back
+        // from folding onto the visible shell (volume ratio 0.00 before);
+        // see tests/partial_view.rs for the completed closure.
+        assert!(s.precision >= 0.45, "frame {}: precision {s:?}", r.frame);
+        assert!(s.recall_visible >= 0.8, "frame {}: {s:?}", r.frame);
         assert!(s.fscore >= 0.4, "frame {}: {s:?}", r.frame);
+        assert!(
+            (0.4..=1.7).contains(&s.volume_ratio),
+            "frame {}: {s:?}",
+            r.frame
+        );
         match (r.path, r.reason) {
             (StartPath::Warm, _) => {
                 assert!(r.iterations <= warm_cap, "frame {}", r.frame);

@@ -171,7 +171,7 @@ impl Default for MembraneConfig {
             attributes: Vec::new(),
             threads: 0,
             viewpoint: super::view::Viewpoint::Mode(super::view::ViewMode::Auto),
-            view_completion: true,
+            view_completion: false,
         }
     }
 }

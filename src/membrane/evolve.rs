@@ -170,6 +170,8 @@ struct Stepper<'a> {
     points: &'a [Vec3],
     outside: Option<&'a OutsideGrid>,
     cross_max: f64,
+    /// Centroid of the points: the inward force never moves a sample away from it.
+    center: Vec3,
 }
 
 impl Stepper<'_> {
@@ -247,7 +249,13 @@ impl Stepper<'_> {
                 };
             }
         }
-        if allow_inward && self.outside.is_some_and(|g| g.is_outside(&sp.p)) {
+        // Inward means toward the object: where the surface has folded over
+        // (its normal facing the centroid) "inward" would push it outward and
+        // inflate the membrane, so the force is withheld there.
+        if allow_inward
+            && n.dot(&(sp.p - self.center)) > 0.0
+            && self.outside.is_some_and(|g| g.is_outside(&sp.p))
+        {
             return SampleOut {
                 shift: -cfg.inward_step * depth,
                 eta: 0.0,
@@ -394,10 +402,11 @@ pub(crate) fn run(
     // Single views: the viewpoint, its z-buffer, and the mirrored completion
     // of the unseen side (membrane/view.rs).
     let (mut points, mut d_used) = (points, d_used);
-    let view = view::resolve(cfg.viewpoint, &points, delta);
+    let mut view = view::resolve(cfg.viewpoint, &points, delta);
     let mut points_completed = 0;
-    if let (Some(vb), true) = (&view, cfg.view_completion) {
+    if let (Some(vb), true) = (&mut view, cfg.view_completion) {
         let extra = vb.complete(&points);
+        vb.set_back(extra.iter().map(|(q, _)| q));
         points_completed = extra.len();
         points.reserve(extra.len());
         d_used.reserve(extra.len());
@@ -420,9 +429,10 @@ pub(crate) fn run(
             1 << 22,
         )
         .map(|mut g| {
-            // The occluded back of a single view is unknown, not empty.
+            // The occluded back of a single view is unknown, not empty —
+            // except beyond the back of the completion.
             if let Some(vb) = &view {
-                g.restrict(|c| vb.is_seen_free(c));
+                g.restrict(|c| vb.is_seen_free(c) || vb.is_beyond_back(c));
             }
             g
         })
@@ -436,6 +446,7 @@ pub(crate) fn run(
         points: &points,
         outside: outside.as_ref(),
         cross_max: cfg.cross_max * scale,
+        center: points.iter().sum::<Vec3>() / points.len() as f64,
     };
     times.prepare_ms = ms(t_start);
 

@@ -79,6 +79,9 @@ pub struct ViewBuffer {
     /// Nearest range per bin (`INFINITY` where nothing was seen).
     near: Vec<f64>,
     margin: f64,
+    /// Depth (along the view direction) beyond which nothing of the object
+    /// lies: the back of the completion (`INFINITY` without one).
+    back: f64,
 }
 
 impl ViewBuffer {
@@ -142,6 +145,7 @@ impl ViewBuffer {
             dims,
             near: vec![f64::INFINITY; dims[0] * dims[1]],
             margin: MARGIN_DELTA * delta,
+            back: f64::INFINITY,
         };
         for (p, &r) in points.iter().zip(&ranges) {
             if let Some(c) = vb.cell(p) {
@@ -194,6 +198,22 @@ impl ViewBuffer {
     pub fn is_seen_free(&self, p: &Vec3) -> bool {
         let r = (p - self.eye).norm();
         r + self.margin < self.nearest_seen(p)
+    }
+
+    /// Set the back of the object to the deepest of `points` (the
+    /// completion): space beyond it counts as outside.
+    pub fn set_back<'a>(&mut self, points: impl Iterator<Item = &'a Vec3>) {
+        let deepest = points
+            .map(|q| (q - self.eye).dot(&self.dir))
+            .fold(f64::NEG_INFINITY, f64::max);
+        if deepest.is_finite() {
+            self.back = deepest + self.margin;
+        }
+    }
+
+    /// True when `p` lies deeper than the back of the completion.
+    pub fn is_beyond_back(&self, p: &Vec3) -> bool {
+        (p - self.eye).dot(&self.dir) > self.back
     }
 
     /// True when `p` lies behind the seen surface (by more than the margin).
