@@ -16,6 +16,9 @@ pub enum Error {
     /// An input cloud or mesh was unusable (empty, degenerate, inconsistent).
     #[error(transparent)]
     Cloud(#[from] crate::cloud::CloudError),
+    /// A file could not be read or written.
+    #[error(transparent)]
+    Io(#[from] crate::io::IoError),
     /// A ROS 2 message could not be encoded or decoded.
     #[error(transparent)]
     Wire(#[from] crate::wire::WireError),

@@ -13,6 +13,8 @@
 //! | [`mesh`] | the indexed triangle mesh produced by the membrane, with per-vertex scalars |
 //! | [`config`] | the one annotated configuration (`launch/sepmem.json5`), loading and `--set` overrides |
 //! | [`error`] | the crate-level error type |
+//! | [`synth`] | depth-camera simulation of moving meshes (visible side, noise, outliers, labels) |
+//! | [`io`] | PLY / PCD / XYZ / OBJ readers, PLY / OBJ / PCD writers |
 //! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
 //! | [`metrics`] | Chamfer, F-score and normal consistency (ONet/SAP protocol), surface sampling |
 //! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
@@ -32,12 +34,14 @@ pub mod cloud;
 pub mod config;
 pub mod density;
 pub mod error;
+pub mod io;
 pub mod membrane;
 pub mod mesh;
 pub mod metrics;
 pub mod separability;
 pub mod shapes;
 pub mod spline;
+pub mod synth;
 pub mod wire;
 
 pub use cloud::{Aabb, Attribute, PointCloud, Vec3};
