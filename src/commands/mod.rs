@@ -1,3 +1,4 @@
 //! One module per `sepmem` subcommand.
 
+pub mod bench;
 pub mod config;

@@ -1,0 +1,61 @@
+//! End-to-end test of `sepmem bench --quick`: the command runs, writes
+//! Markdown and JSON, every scored row has finite metrics, and the measured
+//! F-score on the sphere is high.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use std::process::Command;
+
+#[test]
+fn quick_bench_writes_finite_scores_and_sphere_is_reconstructed() {
+    let out = tempfile::tempdir().unwrap();
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_sepmem"));
+    cmd.args(["bench", "--quick", "--out"]).arg(out.path());
+    match common::shared_datasets("quick_bench (real-scan section)") {
+        Some(d) => cmd.env("SEPMEM_DATASETS", d),
+        None => cmd.env("SEPMEM_DATASETS", out.path().join("no-datasets")),
+    };
+    let res = cmd.output().unwrap();
+    let stderr = String::from_utf8_lossy(&res.stderr);
+    assert!(res.status.success(), "bench failed: {stderr}");
+    let stdout = String::from_utf8_lossy(&res.stdout);
+    assert!(stdout.contains("## Table 1"), "{stdout}");
+
+    let md = std::fs::read_to_string(out.path().join("bench.md")).unwrap();
+    assert_eq!(md, stdout);
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.path().join("bench.json")).unwrap())
+            .unwrap();
+
+    let finite = |run: &serde_json::Value, what: &str| {
+        let s = &run["scores"];
+        for k in ["chamfer_l1", "fscore", "normal_consistency"] {
+            let v = s[k].as_f64();
+            assert!(v.is_some_and(f64::is_finite), "{what}: {k} = {:?} ({run})", s[k]);
+        }
+        assert_eq!(run["watertight"], true, "{what}: output mesh not watertight");
+    };
+    let rows = json["table1"]["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2 * 4, "quick Table 1 is 2 shapes x 4 conditions");
+    for r in rows {
+        finite(&r["run"], &format!("{} / {}", r["shape"], r["condition"]));
+    }
+    let sphere = rows
+        .iter()
+        .find(|r| r["shape"] == "sphere" && r["condition"] == "original")
+        .unwrap();
+    let f = sphere["run"]["scores"]["fscore"].as_f64().unwrap();
+    assert!(f >= 0.95, "sphere F-score {f}");
+    let cd = sphere["run"]["scores"]["chamfer_l1"].as_f64().unwrap();
+    assert!(cd <= 0.01, "sphere Chamfer-L1 {cd}");
+
+    let sweep = json["sweep"].as_array().unwrap();
+    assert_eq!(sweep.len(), 6);
+    for r in sweep {
+        finite(&r["run"], &format!("sweep σ={}", r["sigma"]));
+    }
+    let speed = &json["speed"];
+    assert!(speed["median_ms"].as_f64().is_some_and(|v| v > 0.0), "{speed}");
+    assert_eq!(speed["phases"].as_array().unwrap().len(), 6);
+}
