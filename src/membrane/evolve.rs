@@ -153,11 +153,20 @@ struct SampleOut {
     state: u8,
 }
 
+/// Per-thread buffers: the search's own plus the centring band.
+#[derive(Debug, Default)]
+struct ThreadScratch {
+    search: SearchScratch,
+    /// (lateral distance², normal offset) of the band's points.
+    band: Vec<(f64, f64)>,
+}
+
 /// Everything the per-sample search needs.
 struct Stepper<'a> {
     cfg: &'a MembraneConfig,
     searcher: Searcher<'a>,
     delta: f64,
+    points: &'a [Vec3],
     outside: Option<&'a OutsideGrid>,
     cross_max: f64,
 }
@@ -172,8 +181,9 @@ impl Stepper<'_> {
         j: usize,
         depth: f64,
         allow_inward: bool,
-        scratch: &mut SearchScratch,
+        ts: &mut ThreadScratch,
     ) -> SampleOut {
+        let scratch = &mut ts.search;
         let cfg = self.cfg;
         let sp = surface.eval_at(layout, i, j);
         let n = surface.normal(&sp);
@@ -208,9 +218,27 @@ impl Stepper<'_> {
         if let Some((t, eta)) = best {
             let lo = t - cfg.band_inner_delta * d;
             let hi = t + cfg.band_outer_delta * d;
-            let count = scratch.count_in_band(lo, hi);
+            // Robust centring on the layer: median normal offset of the
+            // band's points nearest to the sample's axis (the nearer half,
+            // at least 3), which limits the curvature bias of wide boxes.
+            ts.band.clear();
+            for (&off, &idx) in scratch.offsets().iter().zip(scratch.indices()) {
+                if off >= lo && off <= hi {
+                    let d = self.points[idx as usize] - sp.p;
+                    ts.band.push(((d.norm_squared() - off * off).max(0.0), off));
+                }
+            }
+            let count = ts.band.len();
             if count > 0 && count as f64 >= cfg.significance * expected {
-                let m = scratch.median_offset_in_band(lo, hi).unwrap_or(t);
+                let keep = count.div_ceil(2).max(3).min(count);
+                if keep < count {
+                    ts.band
+                        .select_nth_unstable_by(keep - 1, |a, b| a.0.total_cmp(&b.0));
+                }
+                let near = &mut ts.band[..keep];
+                let mid = keep / 2;
+                near.select_nth_unstable_by(mid, |a, b| a.1.total_cmp(&b.1));
+                let m = near[mid].1;
                 return SampleOut {
                     shift: m,
                     eta,
@@ -236,7 +264,7 @@ impl Stepper<'_> {
         depth: f64,
         allow_inward: bool,
         outs: &mut Vec<SampleOut>,
-        scratches: &mut [SearchScratch],
+        scratches: &mut [ThreadScratch],
     ) {
         let un = layout.u_n();
         let vn = layout.v_n();
@@ -382,6 +410,7 @@ pub(crate) fn run(
         cfg,
         searcher,
         delta,
+        points: &points,
         outside: outside.as_ref(),
         cross_max: cfg.cross_max * scale,
     };
@@ -422,10 +451,11 @@ pub(crate) fn run(
     } * scale)
         .max(floor);
     let chunks = 4 * rayon::current_num_threads().max(1);
-    let mut scratches: Vec<SearchScratch> = (0..chunks).map(|_| SearchScratch::new()).collect();
+    let mut scratches: Vec<ThreadScratch> = (0..chunks).map(|_| ThreadScratch::default()).collect();
     let mut outs: Vec<SampleOut> = Vec::new();
     let mut shifts: Vec<f64> = Vec::new();
     let mut targets: Vec<Vec3> = Vec::new();
+    let mut moving: Vec<f64> = Vec::new();
     let mut eta_hist: Vec<f64> = Vec::new();
     let mut grids: Vec<[usize; 2]> = Vec::new();
     let mut iteration_ms: Vec<f64> = Vec::new();
@@ -484,7 +514,23 @@ pub(crate) fn run(
         let prev = eta_hist.last().copied();
         eta_hist.push(eta_g);
         iter_on_grid += 1;
-        depth = (depth * cfg.depth_decay).max(floor);
+        // Shrink the search depth, but not below what the membrane still
+        // travels: 2.5× the 90th percentile of the moving samples' shifts.
+        moving.clear();
+        moving.extend(
+            outs.iter()
+                .zip(&shifts)
+                .filter(|(o, _)| o.state != 0)
+                .map(|(_, s)| s.abs()),
+        );
+        let travel = if moving.is_empty() {
+            0.0
+        } else {
+            let k = (moving.len() * 9 / 10).min(moving.len() - 1);
+            let (_, q, _) = moving.select_nth_unstable_by(k, f64::total_cmp);
+            2.5 * *q
+        };
+        depth = (depth * cfg.depth_decay).max(travel).min(depth).max(floor);
         let gain = prev.map_or(f64::INFINITY, |p| eta_g - p);
         let can_grow = m < max_grid[0] || l < max_grid[1];
         if can_grow {
