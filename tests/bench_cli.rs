@@ -32,12 +32,23 @@ fn quick_bench_writes_finite_scores_and_sphere_is_reconstructed() {
         let s = &run["scores"];
         for k in ["chamfer_l1", "fscore", "normal_consistency"] {
             let v = s[k].as_f64();
-            assert!(v.is_some_and(f64::is_finite), "{what}: {k} = {:?} ({run})", s[k]);
+            assert!(
+                v.is_some_and(f64::is_finite),
+                "{what}: {k} = {:?} ({run})",
+                s[k]
+            );
         }
-        assert_eq!(run["watertight"], true, "{what}: output mesh not watertight");
+        assert_eq!(
+            run["watertight"], true,
+            "{what}: output mesh not watertight"
+        );
     };
     let rows = json["table1"]["rows"].as_array().unwrap();
-    assert_eq!(rows.len(), 2 * 4, "quick Table 1 is 2 shapes x 4 conditions");
+    assert_eq!(
+        rows.len(),
+        2 * 4,
+        "quick Table 1 is 2 shapes x 4 conditions"
+    );
     for r in rows {
         finite(&r["run"], &format!("{} / {}", r["shape"], r["condition"]));
     }
@@ -56,6 +67,9 @@ fn quick_bench_writes_finite_scores_and_sphere_is_reconstructed() {
         finite(&r["run"], &format!("sweep σ={}", r["sigma"]));
     }
     let speed = &json["speed"];
-    assert!(speed["median_ms"].as_f64().is_some_and(|v| v > 0.0), "{speed}");
+    assert!(
+        speed["median_ms"].as_f64().is_some_and(|v| v > 0.0),
+        "{speed}"
+    );
     assert_eq!(speed["phases"].as_array().unwrap().len(), 6);
 }
