@@ -38,6 +38,9 @@ pub struct AttributeWeight {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MembraneConfig {
+    /// Thin larger clouds to at most this many points (deterministic
+    /// pseudo-random subsample) before anything else; 0 keeps every point.
+    pub max_points: usize,
     /// k of the per-point mean k-NN distance d_i (paper Eq. 5).
     pub knn_k: usize,
     /// Drop points whose d_i exceeds this multiple of the median d_i before
@@ -125,6 +128,7 @@ pub struct MembraneConfig {
 impl Default for MembraneConfig {
     fn default() -> Self {
         Self {
+            max_points: 8000,
             knn_k: 8,
             outlier_factor: 2.0,
             local_delta: false,

@@ -21,6 +21,7 @@ use crate::separability::search::{Cuboid, Delta, SearchScratch, Searcher};
 use crate::spline::{regrid, ClosedSurface, FitSystem, Layout};
 use rayon::prelude::*;
 use std::collections::HashMap;
+use std::sync::{Mutex, OnceLock};
 use std::time::Instant;
 
 /// Smallest number of points the membrane accepts.
@@ -119,7 +120,23 @@ pub fn sample_counts(cfg: &MembraneConfig, m: usize, l: usize) -> (usize, usize)
     (div(m + 1), div(l))
 }
 
-/// Cache of factored fit systems, one per control grid.
+/// Key of a factored fit system: grid, sample counts and roughness bits.
+type FitKey = (usize, usize, usize, usize, u64);
+
+/// Process-wide cache of factored fit systems. The normal matrix depends
+/// only on the control grid, the sample layout and the roughness weight, so
+/// it is factored once per process and reused by every reconstruction (the
+/// node reconstructs the same grids every frame).
+fn shared_fits() -> &'static Mutex<HashMap<FitKey, FitSystem>> {
+    static CACHE: OnceLock<Mutex<HashMap<FitKey, FitSystem>>> = OnceLock::new();
+    CACHE.get_or_init(|| Mutex::new(HashMap::new()))
+}
+
+/// Largest number of factored systems kept by [`shared_fits`].
+const SHARED_FITS_MAX: usize = 64;
+
+/// Cache of factored fit systems, one per control grid (per reconstruction;
+/// filled from [`shared_fits`]).
 struct Fits {
     roughness: f64,
     map: HashMap<(usize, usize), FitSystem>,
@@ -134,7 +151,26 @@ impl Fits {
     ) -> Result<&mut FitSystem, MembraneError> {
         if !self.map.contains_key(&(m, l)) {
             let (un, vn) = sample_counts(cfg, m, l);
-            let sys = FitSystem::new(Layout::samples(m, l, un, vn)?, self.roughness)?;
+            let key = (m, l, un, vn, self.roughness.to_bits());
+            let cached = shared_fits()
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .get(&key)
+                .cloned();
+            let sys = match cached {
+                Some(s) => s,
+                None => {
+                    let sys = FitSystem::new(Layout::samples(m, l, un, vn)?, self.roughness)?;
+                    let mut shared = shared_fits()
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner);
+                    if shared.len() >= SHARED_FITS_MAX {
+                        shared.clear();
+                    }
+                    shared.insert(key, sys.clone());
+                    sys
+                }
+            };
             self.map.insert((m, l), sys);
         }
         self.map.get_mut(&(m, l)).ok_or(MembraneError::Config {
@@ -322,6 +358,33 @@ fn median_filter(outs: &[SampleOut], un: usize, vn: usize, shifts: &mut Vec<f64>
     }
 }
 
+/// Keep at most `cap` of `points` (0 = all): the points whose index hash
+/// falls below `cap/len`, a deterministic pseudo-random subsample that does
+/// not alias with scan-line order. Exactly `cap` points are kept.
+pub fn thin(points: Vec<Vec3>, cap: usize) -> Vec<Vec3> {
+    let n = points.len();
+    if cap == 0 || n <= cap {
+        return points;
+    }
+    // SplitMix64 of the index: a fixed pseudo-random key per index.
+    let key = |i: usize| -> u64 {
+        let mut z = (i as u64).wrapping_add(0x9E37_79B9_7F4A_7C15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    };
+    let mut keys: Vec<u64> = (0..n).map(key).collect();
+    let (_, kth, _) = keys.select_nth_unstable(cap - 1);
+    let limit = *kth;
+    let mut out = Vec::with_capacity(cap);
+    for (i, p) in points.into_iter().enumerate() {
+        if key(i) <= limit && out.len() < cap {
+            out.push(p);
+        }
+    }
+    out
+}
+
 fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
 }
@@ -345,6 +408,9 @@ pub(crate) fn run(
         .filter(|p| p.iter().all(|c| c.is_finite()))
         .collect();
     let points_non_finite = points_in - finite.len();
+    let finite_len = finite.len();
+    let finite = thin(finite, cfg.max_points);
+    let points_thinned = finite_len - finite.len();
     if finite.is_empty() {
         return Err(CloudError::Empty.into());
     }
@@ -460,6 +526,10 @@ pub(crate) fn run(
     let mut grids: Vec<[usize; 2]> = Vec::new();
     let mut iteration_ms: Vec<f64> = Vec::new();
     let mut iter_on_grid = 0usize;
+    // Per-sample η* of the last iteration and its grid: the output's
+    // per-vertex separability when the grid did not change after it.
+    let mut last_eta: Vec<f64> = Vec::new();
+    let mut last_eta_grid = [0usize; 2];
     let mut plateau = 0usize;
     let mut last_iter = 0.0f64;
     let max_grid = if cfg.adaptive {
@@ -491,6 +561,9 @@ pub(crate) fn run(
         let t_search = Instant::now();
         stepper.search_all(&surface, &layout, depth, true, &mut outs, &mut scratches);
         let eta_g = outs.iter().map(|o| o.eta).sum::<f64>() / outs.len() as f64;
+        last_eta.clear();
+        last_eta.extend(outs.iter().map(|o| o.eta));
+        last_eta_grid = [m, l];
         if cfg.median_filter {
             median_filter(&outs, layout.u_n(), layout.v_n(), &mut shifts);
         } else {
@@ -565,8 +638,15 @@ pub(crate) fn run(
     let t_mesh = Instant::now();
     let (m, l) = (surface.m(), surface.l());
     let layout = fits.get(cfg, m, l)?.layout().clone();
-    stepper.search_all(&surface, &layout, floor, false, &mut outs, &mut scratches);
-    let eta: Vec<f64> = outs.iter().map(|o| o.eta).collect();
+    // The last iteration's search already scored this layout (the returned
+    // surface is its refit, a sub-δ move): reuse it; search afresh only when
+    // the grid changed after it (or no iteration ran).
+    let eta: Vec<f64> = if last_eta_grid == [m, l] && last_eta.len() == layout.len() {
+        last_eta
+    } else {
+        stepper.search_all(&surface, &layout, floor, false, &mut outs, &mut scratches);
+        outs.iter().map(|o| o.eta).collect()
+    };
     let eta_final = eta.iter().sum::<f64>() / eta.len().max(1) as f64;
     let mesh = extract_mesh(&surface, &layout, &eta);
     times.mesh_ms = ms(t_mesh);
@@ -574,6 +654,7 @@ pub(crate) fn run(
     let report = Report {
         points_in,
         points_non_finite,
+        points_thinned,
         points_outliers,
         points_used: points.len(),
         delta,
