@@ -24,6 +24,9 @@ use std::collections::HashMap;
 use std::sync::{Mutex, OnceLock};
 use std::time::Instant;
 
+/// The robust shift centres on the nearest 1/KEEP_DIV of the band points.
+const KEEP_DIV: usize = 2;
+
 /// Smallest number of points the membrane accepts.
 pub const MIN_POINTS: usize = 16;
 
@@ -266,7 +269,7 @@ impl Stepper<'_> {
             }
             let count = ts.band.len();
             if count > 0 && count as f64 >= cfg.significance * expected {
-                let keep = count.div_ceil(2).max(3).min(count);
+                let keep = count.div_ceil(KEEP_DIV).max(3).min(count);
                 if keep < count {
                     ts.band
                         .select_nth_unstable_by(keep - 1, |a, b| a.0.total_cmp(&b.0));
@@ -532,6 +535,7 @@ pub(crate) fn run(
     let mut last_eta_grid = [0usize; 2];
     let mut plateau = 0usize;
     let mut last_iter = 0.0f64;
+    let mut last_samples = 1usize;
     let max_grid = if cfg.adaptive {
         [
             cfg.grid_max[0].max(surface.m()),
@@ -549,8 +553,12 @@ pub(crate) fn run(
             break StopReason::IterationBudget;
         }
         if let Some(dl) = budget.deadline {
+            // Predict this iteration's time from the last one, scaled by the
+            // sample count when the grid grew since.
+            let (un, vn) = sample_counts(cfg, surface.m(), surface.l());
+            let predicted = last_iter * (un * vn) as f64 / last_samples.max(1) as f64;
             let now = Instant::now();
-            if now >= dl || (dl - now).as_secs_f64() * 1e3 < last_iter {
+            if now >= dl || (dl - now).as_secs_f64() * 1e3 < predicted {
                 break StopReason::Deadline;
             }
         }
@@ -631,6 +639,7 @@ pub(crate) fn run(
             }
         }
         last_iter = ms(t_it);
+        last_samples = layout.len();
         iteration_ms.push(last_iter);
     };
 
