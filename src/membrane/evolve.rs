@@ -16,6 +16,7 @@ use super::occupancy::OutsideGrid;
 use super::{Budget, MembraneError, PhaseTimes, Reconstruction, Report, StopReason, WarmStart};
 use crate::cloud::{Aabb, CloudError, PointCloud, Vec3};
 use crate::density::Density;
+use crate::separability::attribute::{AttributeSet, AttributeWeights, ChannelWeight};
 use crate::separability::grid::SpatialIndex;
 use crate::separability::search::{Cuboid, Delta, SearchScratch, Searcher};
 use crate::spline::{regrid, ClosedSurface, FitSystem, Layout};
@@ -361,10 +362,64 @@ fn median_filter(outs: &[SampleOut], un: usize, vn: usize, shifts: &mut Vec<f64>
     }
 }
 
+/// Radius of the `density` attribute (neighbour count), in multiples of δ.
+const DENSITY_ATTRIBUTE_RADIUS: f64 = 2.0;
+
+/// The attribute channels and weights of the weighted separability (paper
+/// Eq. 9) named by `membrane.attributes` / `membrane.spatial_weight`, taken
+/// from `cloud` (the used points). `intensity`, `luma` (colour from `r, g, b`)
+/// and `density` are the built-in channels; any other name is a float
+/// channel of the input.
+///
+/// # Errors
+/// [`MembraneError::MissingAttribute`] when the cloud lacks a named channel;
+/// [`MembraneError::Config`] for a bad weight.
+fn attribute_set(
+    cloud: &PointCloud,
+    cfg: &MembraneConfig,
+    delta: f64,
+) -> Result<AttributeSet, MembraneError> {
+    let mut w = AttributeWeights {
+        point: cfg.spatial_weight,
+        intensity: 0.0,
+        luma: 0.0,
+        density: 0.0,
+        channels: Vec::new(),
+    };
+    for a in &cfg.attributes {
+        match a.name.as_str() {
+            "intensity" => w.intensity += a.weight,
+            "luma" => w.luma += a.weight,
+            "density" => w.density += a.weight,
+            other => w.channels.push(ChannelWeight {
+                name: other.to_string(),
+                weight: a.weight,
+            }),
+        }
+    }
+    let set =
+        AttributeSet::from_cloud(cloud, &w, delta, DENSITY_ATTRIBUTE_RADIUS).map_err(|e| {
+            MembraneError::Config {
+                key: "attributes",
+                problem: e.to_string(),
+            }
+        })?;
+    if let Some(name) = set.missing().first() {
+        return Err(MembraneError::MissingAttribute(name.clone()));
+    }
+    if set.total_weight() <= 0.0 {
+        return Err(MembraneError::Config {
+            key: "spatial_weight",
+            problem: "the spatial weight and the attribute weights sum to 0".into(),
+        });
+    }
+    Ok(set)
+}
+
 /// Keep at most `cap` of `points` (0 = all): the points whose index hash
 /// falls below `cap/len`, a deterministic pseudo-random subsample that does
 /// not alias with scan-line order. Exactly `cap` points are kept.
-pub fn thin(points: Vec<Vec3>, cap: usize) -> Vec<Vec3> {
+pub fn thin<T>(points: Vec<T>, cap: usize) -> Vec<T> {
     let n = points.len();
     if cap == 0 || n <= cap {
         return points;
@@ -404,16 +459,20 @@ pub(crate) fn run(
 
     // ---- prepare: finite points, outlier filter, δ, index, occupancy ----
     let points_in = cloud.len();
-    let finite: Vec<Vec3> = cloud
+    // Indices (into `cloud`) of the points kept by each step, so that the
+    // attribute channels of the weighted mode follow the same selection.
+    let finite_idx: Vec<usize> = cloud
         .points
         .iter()
-        .copied()
-        .filter(|p| p.iter().all(|c| c.is_finite()))
+        .enumerate()
+        .filter(|(_, p)| p.iter().all(|c| c.is_finite()))
+        .map(|(i, _)| i)
         .collect();
-    let points_non_finite = points_in - finite.len();
-    let finite_len = finite.len();
-    let finite = thin(finite, cfg.max_points);
-    let points_thinned = finite_len - finite.len();
+    let points_non_finite = points_in - finite_idx.len();
+    let finite_len = finite_idx.len();
+    let finite_idx = thin(finite_idx, cfg.max_points);
+    let points_thinned = finite_len - finite_idx.len();
+    let finite: Vec<Vec3> = finite_idx.iter().map(|&i| cloud.points[i]).collect();
     if finite.is_empty() {
         return Err(CloudError::Empty.into());
     }
@@ -427,22 +486,19 @@ pub(crate) fn run(
     let density = Density::new(&finite, cfg.knn_k)?;
     let d_all = density.per_point();
     let median_all = density.median();
-    let (points, d_used): (Vec<Vec3>, Vec<f64>) = if cfg.outlier_factor > 0.0 {
+    let keep: Vec<usize> = if cfg.outlier_factor > 0.0 {
         let limit = cfg.outlier_factor * median_all;
-        let kept: (Vec<Vec3>, Vec<f64>) = finite
-            .iter()
-            .zip(d_all)
-            .filter(|(_, &d)| d <= limit)
-            .map(|(p, &d)| (*p, d))
-            .unzip();
-        if kept.0.len() >= MIN_POINTS {
+        let kept: Vec<usize> = (0..finite.len()).filter(|&k| d_all[k] <= limit).collect();
+        if kept.len() >= MIN_POINTS {
             kept
         } else {
-            (finite.clone(), d_all.to_vec())
+            (0..finite.len()).collect()
         }
     } else {
-        (finite.clone(), d_all.to_vec())
+        (0..finite.len()).collect()
     };
+    let points: Vec<Vec3> = keep.iter().map(|&k| finite[k]).collect();
+    let d_used: Vec<f64> = keep.iter().map(|&k| d_all[k]).collect();
     let points_outliers = finite.len() - points.len();
     let bb = Aabb::from_points(&points);
     let e = bb.extent();
@@ -460,10 +516,21 @@ pub(crate) fn run(
         (*m).max(1e-9 * scale)
     };
     let index = SpatialIndex::new(&points)?;
+    // Weighted mode (paper Eq. 9): the attribute channels of the used points.
+    let attributes = if cfg.attributes.is_empty() && cfg.spatial_weight == 1.0 {
+        None
+    } else {
+        let used: Vec<usize> = keep.iter().map(|&k| finite_idx[k]).collect();
+        Some(attribute_set(&cloud.select(&used), cfg, delta)?)
+    };
     let searcher = if cfg.local_delta {
         Searcher::new(&index, Delta::Local(&d_used), cfg.boundaries)?
     } else {
         Searcher::new(&index, Delta::Global(delta), cfg.boundaries)?
+    };
+    let searcher = match &attributes {
+        Some(a) => searcher.with_attributes(a)?,
+        None => searcher,
     };
     let outside = if cfg.inward_force {
         OutsideGrid::new(
