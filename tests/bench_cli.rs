@@ -88,4 +88,13 @@ fn quick_bench_writes_finite_scores_and_sphere_is_reconstructed() {
         "{speed}"
     );
     assert_eq!(speed["phases"].as_array().unwrap().len(), 6);
+    // Warm-started frames: timed, and as accurate as the cold run (measured
+    // against the moved ground truth).
+    let warm = &speed["warm"];
+    assert!(
+        warm["median_ms"].as_f64().is_some_and(|v| v > 0.0),
+        "{warm}"
+    );
+    let fw = warm["fscore"].as_f64().unwrap();
+    assert!(fw >= 0.95, "warm F-score {fw}");
 }

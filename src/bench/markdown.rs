@@ -204,6 +204,18 @@ pub fn render(rep: &BenchReport) -> String {
         for (p, ms) in &s.phases {
             let _ = writeln!(out, "| {p} | {ms:.1} |");
         }
+        if let Some(w) = &s.warm {
+            let _ = writeln!(
+                out,
+                "\n### Warm-started frames (object moved by 1 %, at most {} iterations), {} frames\n\nmedian {:.1} ms, p95 {:.1} ms, max {:.1} ms, median {:.1} iterations, F-score {:.3}\n",
+                w.max_iterations, w.frames, w.median_ms, w.p95_ms, w.max_ms, w.iterations, w.fscore
+            );
+            let _ = writeln!(out, "| phase | median (ms) |");
+            let _ = writeln!(out, "|---|---|");
+            for (p, ms) in &w.phases {
+                let _ = writeln!(out, "| {p} | {ms:.1} |");
+            }
+        }
     }
     if !rep.skipped.is_empty() {
         let _ = writeln!(out, "\n## Skipped\n");

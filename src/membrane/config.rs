@@ -66,6 +66,9 @@ pub struct MembraneConfig {
     pub div_min: usize,
     /// `α` of the sample count formula.
     pub alpha: f64,
+    /// `α` used when warm-started from a previous surface (fewer samples:
+    /// the surface is already close, and frames must be cheap).
+    pub alpha_warm: f64,
     /// Number of boundary positions K tried in each search cuboid.
     pub boundaries: usize,
     /// Shift factor β (< 1) applied to each sample's move.
@@ -141,6 +144,7 @@ impl Default for MembraneConfig {
             adaptive: true,
             div_min: 24,
             alpha: 2.0,
+            alpha_warm: 1.5,
             boundaries: 30,
             beta: 0.9,
             depth_start: 0.3,

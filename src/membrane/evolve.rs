@@ -64,6 +64,9 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), MembraneError> {
     if !pos(cfg.alpha) {
         return bad("alpha", "must be positive");
     }
+    if !pos(cfg.alpha_warm) {
+        return bad("alpha_warm", "must be positive");
+    }
     if cfg.boundaries == 0 {
         return bad("boundaries", "must be at least 1");
     }
@@ -116,8 +119,13 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), MembraneError> {
 
 /// Sample counts `(u_n, v_n)` for an `M × L` grid (paper Eq. 14).
 pub fn sample_counts(cfg: &MembraneConfig, m: usize, l: usize) -> (usize, usize) {
+    sample_counts_alpha(cfg, cfg.alpha, m, l)
+}
+
+/// [`sample_counts`] with another `α` (warm starts use `alpha_warm`).
+pub fn sample_counts_alpha(cfg: &MembraneConfig, alpha: f64, m: usize, l: usize) -> (usize, usize) {
     let div = |q: usize| -> usize {
-        let d = (cfg.alpha * (q as f64 - 1.0) + 1.0).round() as usize;
+        let d = (alpha * (q as f64 - 1.0) + 1.0).round() as usize;
         d.max(cfg.div_min)
     };
     // u is periodic: q columns span q intervals, i.e. the same as q+1 clamped points.
@@ -143,6 +151,8 @@ const SHARED_FITS_MAX: usize = 64;
 /// filled from [`shared_fits`]).
 struct Fits {
     roughness: f64,
+    /// `α` of the sample counts.
+    alpha: f64,
     map: HashMap<(usize, usize), FitSystem>,
 }
 
@@ -154,7 +164,7 @@ impl Fits {
         l: usize,
     ) -> Result<&mut FitSystem, MembraneError> {
         if !self.map.contains_key(&(m, l)) {
-            let (un, vn) = sample_counts(cfg, m, l);
+            let (un, vn) = sample_counts_alpha(cfg, self.alpha, m, l);
             let key = (m, l, un, vn, self.roughness.to_bits());
             let cached = shared_fits()
                 .lock()
@@ -556,6 +566,11 @@ pub(crate) fn run(
     let t_init = Instant::now();
     let mut fits = Fits {
         roughness: cfg.roughness,
+        alpha: if warm.is_some() {
+            cfg.alpha_warm
+        } else {
+            cfg.alpha
+        },
         map: HashMap::new(),
     };
     let mut surface = match warm {
@@ -622,7 +637,7 @@ pub(crate) fn run(
         if let Some(dl) = budget.deadline {
             // Predict this iteration's time from the last one, scaled by the
             // sample count when the grid grew since.
-            let (un, vn) = sample_counts(cfg, surface.m(), surface.l());
+            let (un, vn) = sample_counts_alpha(cfg, fits.alpha, surface.m(), surface.l());
             let predicted = last_iter * (un * vn) as f64 / last_samples.max(1) as f64;
             let now = Instant::now();
             if now >= dl || (dl - now).as_secs_f64() * 1e3 < predicted {
