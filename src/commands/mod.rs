@@ -3,5 +3,8 @@
 pub mod bench;
 pub mod config;
 pub mod demo;
+pub mod eval;
+pub mod filter;
+pub mod reconstruct;
 pub mod replay;
 pub mod synth;
