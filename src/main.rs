@@ -114,6 +114,23 @@ enum Command {
     /// shapes or mesh files) as a rosbag2 MCAP bag, with per-frame ground
     /// truth on /synth/ground_truth.
     Synth(commands::synth::SynthArgs),
+    /// Run the paper's evaluation (Table 1, sphere sweep, static vs adaptive,
+    /// attribute ablation, real scans, speed); write bench.md and bench.json.
+    Bench {
+        /// Reduced set (few shapes, fewer points) that runs in seconds.
+        #[arg(long)]
+        quick: bool,
+        /// Directory for bench.md and bench.json.
+        #[arg(long, default_value = "bench-results")]
+        out: PathBuf,
+        /// Sections (table1, sweep, adaptive, ablation, real, speed) and/or
+        /// Table 1 shape names to run, comma-separated or repeated.
+        #[arg(long, value_delimiter = ',')]
+        only: Vec<String>,
+        /// Shared datasets directory (default: $SEPMEM_DATASETS, else ../shared/datasets).
+        #[arg(long)]
+        datasets: Option<PathBuf>,
+    },
 }
 
 fn main() -> Result<()> {
@@ -158,5 +175,11 @@ fn main() -> Result<()> {
         }
         Command::Replay(args) => commands::replay::run_args(&args),
         Command::Synth(args) => commands::synth::run(&args),
+        Command::Bench {
+            quick,
+            out,
+            only,
+            datasets,
+        } => commands::bench::run(quick, &out, &only, datasets),
     }
 }

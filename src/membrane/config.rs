@@ -38,6 +38,9 @@ pub struct AttributeWeight {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MembraneConfig {
+    /// Thin larger clouds to at most this many points (deterministic
+    /// pseudo-random subsample) before anything else; 0 keeps every point.
+    pub max_points: usize,
     /// k of the per-point mean k-NN distance d_i (paper Eq. 5).
     pub knn_k: usize,
     /// Drop points whose d_i exceeds this multiple of the median d_i before
@@ -63,6 +66,9 @@ pub struct MembraneConfig {
     pub div_min: usize,
     /// `α` of the sample count formula.
     pub alpha: f64,
+    /// `α` used when warm-started from a previous surface (fewer samples:
+    /// the surface is already close, and frames must be cheap).
+    pub alpha_warm: f64,
     /// Number of boundary positions K tried in each search cuboid.
     pub boundaries: usize,
     /// Shift factor β (< 1) applied to each sample's move.
@@ -130,6 +136,7 @@ pub struct MembraneConfig {
 impl Default for MembraneConfig {
     fn default() -> Self {
         Self {
+            max_points: 8000,
             knn_k: 8,
             outlier_factor: 2.0,
             local_delta: false,
@@ -142,6 +149,7 @@ impl Default for MembraneConfig {
             adaptive: true,
             div_min: 24,
             alpha: 2.0,
+            alpha_warm: 1.5,
             boundaries: 30,
             beta: 0.9,
             depth_start: 0.3,

@@ -17,12 +17,17 @@ use super::view;
 use super::{Budget, MembraneError, PhaseTimes, Reconstruction, Report, StopReason, WarmStart};
 use crate::cloud::{Aabb, CloudError, PointCloud, Vec3};
 use crate::density::Density;
+use crate::separability::attribute::{AttributeSet, AttributeWeights, ChannelWeight};
 use crate::separability::grid::SpatialIndex;
 use crate::separability::search::{Cuboid, Delta, SearchScratch, Searcher};
 use crate::spline::{regrid, ClosedSurface, FitSystem, Layout};
 use rayon::prelude::*;
 use std::collections::HashMap;
+use std::sync::{Mutex, OnceLock};
 use std::time::Instant;
+
+/// The robust shift centres on the nearest 1/KEEP_DIV of the band points.
+const KEEP_DIV: usize = 2;
 
 /// Smallest number of points the membrane accepts.
 pub const MIN_POINTS: usize = 16;
@@ -59,6 +64,9 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), MembraneError> {
     }
     if !pos(cfg.alpha) {
         return bad("alpha", "must be positive");
+    }
+    if !pos(cfg.alpha_warm) {
+        return bad("alpha_warm", "must be positive");
     }
     if cfg.boundaries == 0 {
         return bad("boundaries", "must be at least 1");
@@ -112,17 +120,40 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), MembraneError> {
 
 /// Sample counts `(u_n, v_n)` for an `M × L` grid (paper Eq. 14).
 pub fn sample_counts(cfg: &MembraneConfig, m: usize, l: usize) -> (usize, usize) {
+    sample_counts_alpha(cfg, cfg.alpha, m, l)
+}
+
+/// [`sample_counts`] with another `α` (warm starts use `alpha_warm`).
+pub fn sample_counts_alpha(cfg: &MembraneConfig, alpha: f64, m: usize, l: usize) -> (usize, usize) {
     let div = |q: usize| -> usize {
-        let d = (cfg.alpha * (q as f64 - 1.0) + 1.0).round() as usize;
+        let d = (alpha * (q as f64 - 1.0) + 1.0).round() as usize;
         d.max(cfg.div_min)
     };
     // u is periodic: q columns span q intervals, i.e. the same as q+1 clamped points.
     (div(m + 1), div(l))
 }
 
-/// Cache of factored fit systems, one per control grid.
+/// Key of a factored fit system: grid, sample counts and roughness bits.
+type FitKey = (usize, usize, usize, usize, u64);
+
+/// Process-wide cache of factored fit systems. The normal matrix depends
+/// only on the control grid, the sample layout and the roughness weight, so
+/// it is factored once per process and reused by every reconstruction (the
+/// node reconstructs the same grids every frame).
+fn shared_fits() -> &'static Mutex<HashMap<FitKey, FitSystem>> {
+    static CACHE: OnceLock<Mutex<HashMap<FitKey, FitSystem>>> = OnceLock::new();
+    CACHE.get_or_init(|| Mutex::new(HashMap::new()))
+}
+
+/// Largest number of factored systems kept by [`shared_fits`].
+const SHARED_FITS_MAX: usize = 64;
+
+/// Cache of factored fit systems, one per control grid (per reconstruction;
+/// filled from [`shared_fits`]).
 struct Fits {
     roughness: f64,
+    /// `α` of the sample counts.
+    alpha: f64,
     map: HashMap<(usize, usize), FitSystem>,
 }
 
@@ -134,8 +165,27 @@ impl Fits {
         l: usize,
     ) -> Result<&mut FitSystem, MembraneError> {
         if !self.map.contains_key(&(m, l)) {
-            let (un, vn) = sample_counts(cfg, m, l);
-            let sys = FitSystem::new(Layout::samples(m, l, un, vn)?, self.roughness)?;
+            let (un, vn) = sample_counts_alpha(cfg, self.alpha, m, l);
+            let key = (m, l, un, vn, self.roughness.to_bits());
+            let cached = shared_fits()
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .get(&key)
+                .cloned();
+            let sys = match cached {
+                Some(s) => s,
+                None => {
+                    let sys = FitSystem::new(Layout::samples(m, l, un, vn)?, self.roughness)?;
+                    let mut shared = shared_fits()
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner);
+                    if shared.len() >= SHARED_FITS_MAX {
+                        shared.clear();
+                    }
+                    shared.insert(key, sys.clone());
+                    sys
+                }
+            };
             self.map.insert((m, l), sys);
         }
         self.map.get_mut(&(m, l)).ok_or(MembraneError::Config {
@@ -233,7 +283,7 @@ impl Stepper<'_> {
             }
             let count = ts.band.len();
             if count > 0 && count as f64 >= cfg.significance * expected {
-                let keep = count.div_ceil(2).max(3).min(count);
+                let keep = count.div_ceil(KEEP_DIV).max(3).min(count);
                 if keep < count {
                     ts.band
                         .select_nth_unstable_by(keep - 1, |a, b| a.0.total_cmp(&b.0));
@@ -331,6 +381,87 @@ fn median_filter(outs: &[SampleOut], un: usize, vn: usize, shifts: &mut Vec<f64>
     }
 }
 
+/// Radius of the `density` attribute (neighbour count), in multiples of δ.
+const DENSITY_ATTRIBUTE_RADIUS: f64 = 2.0;
+
+/// The attribute channels and weights of the weighted separability (paper
+/// Eq. 9) named by `membrane.attributes` / `membrane.spatial_weight`, taken
+/// from `cloud` (the used points). `intensity`, `luma` (colour from `r, g, b`)
+/// and `density` are the built-in channels; any other name is a float
+/// channel of the input.
+///
+/// # Errors
+/// [`MembraneError::MissingAttribute`] when the cloud lacks a named channel;
+/// [`MembraneError::Config`] for a bad weight.
+fn attribute_set(
+    cloud: &PointCloud,
+    cfg: &MembraneConfig,
+    delta: f64,
+) -> Result<AttributeSet, MembraneError> {
+    let mut w = AttributeWeights {
+        point: cfg.spatial_weight,
+        intensity: 0.0,
+        luma: 0.0,
+        density: 0.0,
+        channels: Vec::new(),
+    };
+    for a in &cfg.attributes {
+        match a.name.as_str() {
+            "intensity" => w.intensity += a.weight,
+            "luma" => w.luma += a.weight,
+            "density" => w.density += a.weight,
+            other => w.channels.push(ChannelWeight {
+                name: other.to_string(),
+                weight: a.weight,
+            }),
+        }
+    }
+    let set =
+        AttributeSet::from_cloud(cloud, &w, delta, DENSITY_ATTRIBUTE_RADIUS).map_err(|e| {
+            MembraneError::Config {
+                key: "attributes",
+                problem: e.to_string(),
+            }
+        })?;
+    if let Some(name) = set.missing().first() {
+        return Err(MembraneError::MissingAttribute(name.clone()));
+    }
+    if set.total_weight() <= 0.0 {
+        return Err(MembraneError::Config {
+            key: "spatial_weight",
+            problem: "the spatial weight and the attribute weights sum to 0".into(),
+        });
+    }
+    Ok(set)
+}
+
+/// Keep at most `cap` of `points` (0 = all): the points whose index hash
+/// falls below `cap/len`, a deterministic pseudo-random subsample that does
+/// not alias with scan-line order. Exactly `cap` points are kept.
+pub fn thin<T>(points: Vec<T>, cap: usize) -> Vec<T> {
+    let n = points.len();
+    if cap == 0 || n <= cap {
+        return points;
+    }
+    // SplitMix64 of the index: a fixed pseudo-random key per index.
+    let key = |i: usize| -> u64 {
+        let mut z = (i as u64).wrapping_add(0x9E37_79B9_7F4A_7C15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    };
+    let mut keys: Vec<u64> = (0..n).map(key).collect();
+    let (_, kth, _) = keys.select_nth_unstable(cap - 1);
+    let limit = *kth;
+    let mut out = Vec::with_capacity(cap);
+    for (i, p) in points.into_iter().enumerate() {
+        if key(i) <= limit && out.len() < cap {
+            out.push(p);
+        }
+    }
+    out
+}
+
 fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
 }
@@ -347,13 +478,20 @@ pub(crate) fn run(
 
     // ---- prepare: finite points, outlier filter, δ, index, occupancy ----
     let points_in = cloud.len();
-    let finite: Vec<Vec3> = cloud
+    // Indices (into `cloud`) of the points kept by each step, so that the
+    // attribute channels of the weighted mode follow the same selection.
+    let finite_idx: Vec<usize> = cloud
         .points
         .iter()
-        .copied()
-        .filter(|p| p.iter().all(|c| c.is_finite()))
+        .enumerate()
+        .filter(|(_, p)| p.iter().all(|c| c.is_finite()))
+        .map(|(i, _)| i)
         .collect();
-    let points_non_finite = points_in - finite.len();
+    let points_non_finite = points_in - finite_idx.len();
+    let finite_len = finite_idx.len();
+    let finite_idx = thin(finite_idx, cfg.max_points);
+    let points_thinned = finite_len - finite_idx.len();
+    let finite: Vec<Vec3> = finite_idx.iter().map(|&i| cloud.points[i]).collect();
     if finite.is_empty() {
         return Err(CloudError::Empty.into());
     }
@@ -367,22 +505,19 @@ pub(crate) fn run(
     let density = Density::new(&finite, cfg.knn_k)?;
     let d_all = density.per_point();
     let median_all = density.median();
-    let (points, d_used): (Vec<Vec3>, Vec<f64>) = if cfg.outlier_factor > 0.0 {
+    let keep: Vec<usize> = if cfg.outlier_factor > 0.0 {
         let limit = cfg.outlier_factor * median_all;
-        let kept: (Vec<Vec3>, Vec<f64>) = finite
-            .iter()
-            .zip(d_all)
-            .filter(|(_, &d)| d <= limit)
-            .map(|(p, &d)| (*p, d))
-            .unzip();
-        if kept.0.len() >= MIN_POINTS {
+        let kept: Vec<usize> = (0..finite.len()).filter(|&k| d_all[k] <= limit).collect();
+        if kept.len() >= MIN_POINTS {
             kept
         } else {
-            (finite.clone(), d_all.to_vec())
+            (0..finite.len()).collect()
         }
     } else {
-        (finite.clone(), d_all.to_vec())
+        (0..finite.len()).collect()
     };
+    let points: Vec<Vec3> = keep.iter().map(|&k| finite[k]).collect();
+    let d_used: Vec<f64> = keep.iter().map(|&k| d_all[k]).collect();
     let points_outliers = finite.len() - points.len();
     let bb = Aabb::from_points(&points);
     let e = bb.extent();
@@ -416,10 +551,21 @@ pub(crate) fn run(
         }
     }
     let index = SpatialIndex::new(&points)?;
+    // Weighted mode (paper Eq. 9): the attribute channels of the used points.
+    let attributes = if cfg.attributes.is_empty() && cfg.spatial_weight == 1.0 {
+        None
+    } else {
+        let used: Vec<usize> = keep.iter().map(|&k| finite_idx[k]).collect();
+        Some(attribute_set(&cloud.select(&used), cfg, delta)?)
+    };
     let searcher = if cfg.local_delta {
         Searcher::new(&index, Delta::Local(&d_used), cfg.boundaries)?
     } else {
         Searcher::new(&index, Delta::Global(delta), cfg.boundaries)?
+    };
+    let searcher = match &attributes {
+        Some(a) => searcher.with_attributes(a)?,
+        None => searcher,
     };
     let outside = if cfg.inward_force {
         OutsideGrid::new(
@@ -454,6 +600,11 @@ pub(crate) fn run(
     let t_init = Instant::now();
     let mut fits = Fits {
         roughness: cfg.roughness,
+        alpha: if warm.is_some() {
+            cfg.alpha_warm
+        } else {
+            cfg.alpha
+        },
         map: HashMap::new(),
     };
     let mut surface = match warm {
@@ -494,8 +645,13 @@ pub(crate) fn run(
     let mut grids: Vec<[usize; 2]> = Vec::new();
     let mut iteration_ms: Vec<f64> = Vec::new();
     let mut iter_on_grid = 0usize;
+    // Per-sample η* of the last iteration and its grid: the output's
+    // per-vertex separability when the grid did not change after it.
+    let mut last_eta: Vec<f64> = Vec::new();
+    let mut last_eta_grid = [0usize; 2];
     let mut plateau = 0usize;
     let mut last_iter = 0.0f64;
+    let mut last_samples = 1usize;
     let max_grid = if cfg.adaptive {
         [
             cfg.grid_max[0].max(surface.m()),
@@ -513,8 +669,12 @@ pub(crate) fn run(
             break StopReason::IterationBudget;
         }
         if let Some(dl) = budget.deadline {
+            // Predict this iteration's time from the last one, scaled by the
+            // sample count when the grid grew since.
+            let (un, vn) = sample_counts_alpha(cfg, fits.alpha, surface.m(), surface.l());
+            let predicted = last_iter * (un * vn) as f64 / last_samples.max(1) as f64;
             let now = Instant::now();
-            if now >= dl || (dl - now).as_secs_f64() * 1e3 < last_iter {
+            if now >= dl || (dl - now).as_secs_f64() * 1e3 < predicted {
                 break StopReason::Deadline;
             }
         }
@@ -525,6 +685,9 @@ pub(crate) fn run(
         let t_search = Instant::now();
         stepper.search_all(&surface, &layout, depth, true, &mut outs, &mut scratches);
         let eta_g = outs.iter().map(|o| o.eta).sum::<f64>() / outs.len() as f64;
+        last_eta.clear();
+        last_eta.extend(outs.iter().map(|o| o.eta));
+        last_eta_grid = [m, l];
         if cfg.median_filter {
             median_filter(&outs, layout.u_n(), layout.v_n(), &mut shifts);
         } else {
@@ -592,6 +755,7 @@ pub(crate) fn run(
             }
         }
         last_iter = ms(t_it);
+        last_samples = layout.len();
         iteration_ms.push(last_iter);
     };
 
@@ -599,8 +763,15 @@ pub(crate) fn run(
     let t_mesh = Instant::now();
     let (m, l) = (surface.m(), surface.l());
     let layout = fits.get(cfg, m, l)?.layout().clone();
-    stepper.search_all(&surface, &layout, floor, false, &mut outs, &mut scratches);
-    let eta: Vec<f64> = outs.iter().map(|o| o.eta).collect();
+    // The last iteration's search already scored this layout (the returned
+    // surface is its refit, a sub-δ move): reuse it; search afresh only when
+    // the grid changed after it (or no iteration ran).
+    let eta: Vec<f64> = if last_eta_grid == [m, l] && last_eta.len() == layout.len() {
+        last_eta
+    } else {
+        stepper.search_all(&surface, &layout, floor, false, &mut outs, &mut scratches);
+        outs.iter().map(|o| o.eta).collect()
+    };
     let eta_final = eta.iter().sum::<f64>() / eta.len().max(1) as f64;
     let mesh = extract_mesh(&surface, &layout, &eta);
     times.mesh_ms = ms(t_mesh);
@@ -608,6 +779,7 @@ pub(crate) fn run(
     let report = Report {
         points_in,
         points_non_finite,
+        points_thinned,
         points_outliers,
         points_used: points.len(),
         points_completed,

@@ -141,7 +141,7 @@ impl std::fmt::Display for StopReason {
 /// Wall-clock time per phase, in milliseconds.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 pub struct PhaseTimes {
-    /// Outlier filter, density, spatial index, occupancy grid.
+    /// Subsample, outlier filter, density, spatial index, occupancy grid.
     pub prepare_ms: f64,
     /// Initial surface (octagon fit or warm start).
     pub init_ms: f64,
@@ -162,6 +162,8 @@ pub struct Report {
     pub points_in: usize,
     /// Points dropped as NaN/inf.
     pub points_non_finite: usize,
+    /// Points left out by the `max_points` subsample.
+    pub points_thinned: usize,
     /// Points dropped by the k-NN outlier filter.
     pub points_outliers: usize,
     /// Points the membrane used (including the completion points).
@@ -186,7 +188,9 @@ pub struct Report {
     pub grids: Vec<[usize; 2]>,
     /// Wall-clock duration of each iteration (ms).
     pub iteration_ms: Vec<f64>,
-    /// η_g of the returned surface.
+    /// η_g of the returned surface: the mean of its per-vertex separability
+    /// (the last iteration's search, whose refit is the returned surface, or
+    /// a fresh search when the grid grew after it).
     pub eta_final: f64,
     /// Why the evolution stopped.
     pub stop: StopReason,
