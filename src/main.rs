@@ -69,6 +69,39 @@ enum Command {
     /// shapes or mesh files) as a rosbag2 MCAP bag, with per-frame ground
     /// truth on /synth/ground_truth.
     Synth(commands::synth::SynthArgs),
+    /// Run the live node: subscribe to PointCloud2 topics over zenoh
+    /// (rmw_zenoh keys by default), publish meshes, markers and diagnostics,
+    /// until SIGINT/SIGTERM.
+    Node {
+        /// Configuration file (.json5 or .toml) holding the keys to change.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Override one parameter: section.key=value (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+    },
+    /// Publish a bag's PointCloud2 (and other) messages over zenoh as a ROS 2
+    /// publisher would (rmw_zenoh keys, attachments, liveliness tokens), with
+    /// the recorded timing.
+    Play {
+        /// Input bag: a `.mcap` file, a `.db3` file or a bag directory.
+        bag: PathBuf,
+        /// Speed factor (2 = twice as fast; 0 = as fast as possible).
+        #[arg(long, default_value_t = 1.0)]
+        rate: f64,
+        /// Start again at the end, until interrupted.
+        #[arg(long = "loop")]
+        looped: bool,
+        /// Only play these topics (repeatable; default: all).
+        #[arg(long)]
+        topic: Vec<String>,
+        /// Configuration file (transport settings: node.transport.*).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Override one parameter: section.key=value (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+    },
 }
 
 fn main() -> Result<()> {
@@ -99,5 +132,14 @@ fn main() -> Result<()> {
             commands::replay::run(&bag, out.as_deref(), &topic, &cfg, quiet)
         }
         Command::Synth(args) => commands::synth::run(&args),
+        Command::Node { config, set } => commands::node::run_node(config.as_deref(), &set),
+        Command::Play {
+            bag,
+            rate,
+            looped,
+            topic,
+            config,
+            set,
+        } => commands::node::run_play(&bag, rate, looped, &topic, config.as_deref(), &set),
     }
 }

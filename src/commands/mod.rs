@@ -2,5 +2,6 @@
 
 pub mod config;
 pub mod demo;
+pub mod node;
 pub mod replay;
 pub mod synth;

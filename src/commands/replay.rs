@@ -8,6 +8,7 @@ use sepmem::config::Config;
 use sepmem::pipeline::engine::Engine;
 use sepmem::pipeline::outputs;
 use sepmem::pipeline::StartPath;
+use sepmem::transport::keys::expand_topic_template;
 use std::io::IsTerminal;
 use std::path::Path;
 
@@ -90,6 +91,7 @@ pub fn run_with(
         .transpose()?;
     let mut engine = Engine::new(cfg.membrane.clone(), cfg.pipeline.clone(), cfg.wire.clone());
     let p = &cfg.pipeline;
+    let o = &cfg.node.outputs;
 
     let bar = if std::io::stderr().is_terminal() && !quiet {
         let b = ProgressBar::new(messages.len() as u64);
@@ -168,12 +170,12 @@ pub fn run_with(
         if let Some(w) = writer.as_mut() {
             for r in &ok {
                 w.write(
-                    &p.mesh_topic,
+                    &expand_topic_template(&o.mesh, &m.topic),
                     m.log_time,
                     &outputs::surface_mesh(r, &sample.header),
                 )?;
                 w.write(
-                    &p.frame_diagnostics_topic,
+                    &expand_topic_template(&o.frame_diagnostics, &m.topic),
                     m.log_time,
                     &outputs::frame_diagnostics(
                         r,
@@ -184,7 +186,7 @@ pub fn run_with(
                 )?;
             }
             w.write(
-                &p.markers_topic,
+                &expand_topic_template(&o.markers, &m.topic),
                 m.log_time,
                 &outputs::marker_array(&ok, &sample.header, &p.marker_namespace),
             )?;

@@ -11,12 +11,16 @@
 //! [`shard`]. See [`runtime`] for the task structure and shutdown.
 
 pub mod backend;
+pub mod pipeline_backend;
+#[cfg(feature = "zenoh")]
+pub mod player;
 #[cfg(feature = "zenoh")]
 pub mod runtime;
 pub mod shard;
 pub mod slot;
 pub mod stats;
 
+pub use pipeline_backend::PipelineBackend;
 pub use backend::{
     Backend, Frame, FrameResult, ObjectReport, Output, OutputKind, StatusEntry, TopicProcessor,
 };
@@ -77,8 +81,6 @@ pub struct NodeConfig {
     pub topics: Vec<String>,
     /// Output topic names.
     pub outputs: OutputTopics,
-    /// Per-frame deadline from receipt, in milliseconds.
-    pub deadline_ms: u64,
     /// Period of the `/diagnostics` array, in milliseconds.
     pub diagnostics_period_ms: u64,
     /// A stream silent this long is evicted (state freed, reported STALE).
