@@ -32,12 +32,19 @@ enum Command {
         #[arg(long)]
         annotated: bool,
     },
-    /// Demo: replay the bundled sample bags through the pipeline and write
-    /// meshes (PLY) and output bags to a folder. Needs no router or ROS.
+    /// Demo: start the live node and a bag player on zenoh over loopback,
+    /// replay the bundled sample bags, and write the received meshes (PLY)
+    /// and output bags to a folder. Needs no router or ROS.
     Demo {
         /// Output folder.
         #[arg(short, long, default_value = "demo-out")]
         out: PathBuf,
+        /// Speed factor of the replay (1 = recorded timing).
+        #[arg(long, default_value_t = 1.0)]
+        rate: f64,
+        /// Configuration file (.json5 or .toml) holding the keys to change.
+        #[arg(long)]
+        config: Option<PathBuf>,
         /// Override one parameter: section.key=value (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
@@ -116,9 +123,14 @@ fn main() -> Result<()> {
             set,
             annotated,
         } => commands::config::run(config.as_deref(), &set, annotated),
-        Command::Demo { out, set } => {
-            let cfg = sepmem::config::Config::load(None, &set)?;
-            commands::demo::run(&out, &cfg)
+        Command::Demo {
+            out,
+            rate,
+            config,
+            set,
+        } => {
+            let cfg = sepmem::config::Config::load(config.as_deref(), &set)?;
+            commands::demo::run(&out, &cfg, rate)
         }
         Command::Replay {
             bag,

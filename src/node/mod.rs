@@ -11,6 +11,8 @@
 //! [`shard`]. See [`runtime`] for the task structure and shutdown.
 
 pub mod backend;
+#[cfg(feature = "zenoh")]
+pub mod loopback;
 pub mod pipeline_backend;
 #[cfg(feature = "zenoh")]
 pub mod player;

@@ -1,10 +1,10 @@
-//! The node's production backend: sepmem's frame pipeline
-//! ([`crate::pipeline::Engine`], one per input topic, with one warm-started
-//! tracker per object stream) and the wire codecs.
+//! The node's production backend: sepmem's frame pipeline (one warm-started
+//! [`crate::pipeline::Tracker`] per object stream, paper §III-D..F run per
+//! frame) and the wire codecs.
 //!
 //! Per frame it decodes the `sensor_msgs/PointCloud2`, splits it into object
-//! streams (per segment label when present), evolves each membrane under the
-//! frame's remaining deadline, and encodes one `sepmem_msgs/SurfaceMesh` and
+//! streams (per segment label when present), evolves the objects' membranes
+//! in parallel under the frame's remaining deadline, and encodes one `sepmem_msgs/SurfaceMesh` and
 //! one `sepmem_msgs/FrameDiagnostics` per object plus one
 //! `visualization_msgs/MarkerArray` (DELETEALL, then a TRIANGLE_LIST per
 //! object). `/diagnostics` is a `diagnostic_msgs/DiagnosticArray`.
@@ -13,8 +13,10 @@ use super::backend::{Backend, Frame, FrameResult, ObjectReport, Output, OutputKi
 use super::stats::Level;
 use crate::membrane::MembraneConfig;
 use crate::membrane::StopReason;
-use crate::pipeline::engine::{decode_sample, Engine};
-use crate::pipeline::{outputs, PipelineConfig, StartPath};
+use crate::pipeline::engine::{decode_sample, Processed, StreamCloud};
+use crate::pipeline::{outputs, PipelineConfig, StartPath, StreamKey, Tracker};
+use rayon::prelude::*;
+use std::collections::BTreeMap;
 use crate::transport::RosType;
 use crate::wire::msgs::{
     DiagnosticArray, DiagnosticStatus, FrameDiagnostics, Header, KeyValue, MarkerArray,
@@ -53,10 +55,12 @@ impl PipelineBackend {
 }
 
 struct EngineProcessor {
-    engine: Engine,
+    membrane: MembraneConfig,
+    pipeline: PipelineConfig,
+    limits: WireConfig,
+    trackers: BTreeMap<StreamKey, Tracker>,
     ns: String,
     last_header: Header,
-    budgeted: bool,
 }
 
 fn encode<M: RosMessage>(kind: OutputKind, msg: &M, out: &mut Vec<Output>, errors: &mut Vec<String>) {
@@ -71,8 +75,8 @@ impl TopicProcessor for EngineProcessor {
         let mut sample = match decode_sample(
             &frame.topic,
             &frame.payload,
-            &self.engine.limits,
-            &self.engine.pipeline,
+            &self.limits,
+            &self.pipeline,
         ) {
             Ok(s) => s,
             Err(e) => {
@@ -84,16 +88,38 @@ impl TopicProcessor for EngineProcessor {
         };
         self.last_header = sample.header.clone();
         let streams = std::mem::take(&mut sample.streams);
-        let mut processed = Vec::with_capacity(streams.len());
-        for s in streams {
-            // The node's deadline runs from receipt: each object gets what is
-            // left of it (at least 1 ms, so that one iteration may run).
-            if self.budgeted {
-                let remaining = frame.deadline.saturating_duration_since(Instant::now());
-                self.engine.pipeline.deadline_ms = (remaining.as_secs_f64() * 1e3).max(1.0);
-            }
-            processed.push(self.engine.process(s));
+        // The node's deadline runs from receipt. The objects of a labelled
+        // cloud are evolved in parallel, each with what is left of it, but
+        // never less than a quarter of the configured budget (so that a late
+        // frame still gets a few iterations; it is then counted as late).
+        let mut pipeline = self.pipeline.clone();
+        if pipeline.deadline_ms > 0.0 {
+            let remaining = frame.deadline.saturating_duration_since(Instant::now());
+            pipeline.deadline_ms = (remaining.as_secs_f64() * 1e3).max(0.25 * pipeline.deadline_ms);
         }
+        let mut work: Vec<(Tracker, StreamCloud)> = streams
+            .into_iter()
+            .map(|s| {
+                let t = self
+                    .trackers
+                    .remove(&s.key)
+                    .unwrap_or_else(|| Tracker::new(s.key.clone()));
+                (t, s)
+            })
+            .collect();
+        let membrane = &self.membrane;
+        let outcomes: Vec<Processed> = work
+            .par_iter_mut()
+            .map(|(t, s)| Processed {
+                key: s.key.clone(),
+                points: s.cloud.len(),
+                outcome: t.process(&s.cloud, membrane, &pipeline),
+            })
+            .collect();
+        for (t, s) in work {
+            self.trackers.insert(s.key, t);
+        }
+        let processed = outcomes;
         let mut outs = Vec::with_capacity(2 * processed.len() + 1);
         let mut errors = Vec::new();
         let mut objects = Vec::with_capacity(processed.len());
@@ -193,10 +219,12 @@ impl Backend for PipelineBackend {
 
     fn processor(&self, _topic: &str) -> Box<dyn TopicProcessor> {
         Box::new(EngineProcessor {
-            engine: Engine::new(self.membrane.clone(), self.pipeline.clone(), self.limits.clone()),
+            membrane: self.membrane.clone(),
+            pipeline: self.pipeline.clone(),
+            limits: self.limits.clone(),
+            trackers: BTreeMap::new(),
             ns: self.pipeline.marker_namespace.clone(),
             last_header: Header::default(),
-            budgeted: self.pipeline.deadline_ms > 0.0,
         })
     }
 

@@ -40,6 +40,8 @@ pub struct PlayOptions {
     pub topics: Vec<String>,
     /// Publish bag topic `t` as `remap_prefix + t` (empty: unchanged).
     pub remap_prefix: String,
+    /// Record the time of every put in [`PlaySummary::put_times`].
+    pub record_times: bool,
 }
 
 impl Default for PlayOptions {
@@ -49,6 +51,7 @@ impl Default for PlayOptions {
             looped: false,
             topics: Vec::new(),
             remap_prefix: String::new(),
+            record_times: false,
         }
     }
 }
@@ -60,6 +63,9 @@ pub struct PlaySummary {
     pub per_topic: BTreeMap<String, u64>,
     /// Passes over the bag.
     pub passes: u64,
+    /// (index in [`LoadedBag::messages`], put time in ns since the epoch)
+    /// of every put, when [`PlayOptions::record_times`] is set.
+    pub put_times: Vec<(usize, i64)>,
 }
 
 /// A bag loaded in memory, ready to be played.
@@ -126,7 +132,7 @@ pub async fn play<F: Fn() -> bool>(
     let first = bag.messages.first().map_or(0, |m| m.log_time);
     'passes: loop {
         let start = Instant::now();
-        for m in &bag.messages {
+        for (i, m) in bag.messages.iter().enumerate() {
             if stop() {
                 break 'passes;
             }
@@ -136,6 +142,9 @@ pub async fn play<F: Fn() -> bool>(
                 tokio::time::sleep_until(at.into()).await;
             }
             if let Some(p) = pubs.get(&m.topic) {
+                if opts.record_times {
+                    summary.put_times.push((i, crate::transport::attachment::now_ns()));
+                }
                 p.put(m.data.clone()).await?;
                 *summary.per_topic.entry(name(&m.topic)).or_default() += 1;
             }
