@@ -17,7 +17,9 @@ use sepmem::node::player::{self, PlayOptions};
 use sepmem::node::PipelineBackend;
 use sepmem::transport::RosType;
 use sepmem::wire::convert::trimesh_from_surface;
-use sepmem::wire::msgs::{DiagnosticArray, FrameDiagnostics, MarkerArray, PointCloud2, SurfaceMesh};
+use sepmem::wire::msgs::{
+    DiagnosticArray, FrameDiagnostics, MarkerArray, PointCloud2, SurfaceMesh,
+};
 use sepmem::wire::{self, RosMessage};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -228,7 +230,9 @@ fn write_outputs(
             let mesh = trimesh_from_surface(&msg)?;
             let file = format!(
                 "{}_{:04}.ply",
-                msg.stream_id.trim_start_matches('/').replace(['/', '#'], "_"),
+                msg.stream_id
+                    .trim_start_matches('/')
+                    .replace(['/', '#'], "_"),
                 k
             );
             sepmem::io::save_mesh(dir.join("meshes").join(file), &mesh)?;

@@ -51,9 +51,12 @@ impl LoopbackNode {
             })
         })?;
         let name = cfg.transport.node_name.clone();
-        let harness =
-            Participant::open(&TransportConfig::loopback(&format!("{name}_observer"), Some(port), &[]))
-                .await?;
+        let harness = Participant::open(&TransportConfig::loopback(
+            &format!("{name}_observer"),
+            Some(port),
+            &[],
+        ))
+        .await?;
         let ready: Inbox = Arc::default();
         let r = ready.clone();
         let ready_sub = harness

@@ -22,10 +22,10 @@ pub mod shard;
 pub mod slot;
 pub mod stats;
 
-pub use pipeline_backend::PipelineBackend;
 pub use backend::{
     Backend, Frame, FrameResult, ObjectReport, Output, OutputKind, StatusEntry, TopicProcessor,
 };
+pub use pipeline_backend::PipelineBackend;
 pub use shard::Shard;
 pub use stats::Level;
 

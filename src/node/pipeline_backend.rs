@@ -9,14 +9,14 @@
 //! `visualization_msgs/MarkerArray` (DELETEALL, then a TRIANGLE_LIST per
 //! object). `/diagnostics` is a `diagnostic_msgs/DiagnosticArray`.
 
-use super::backend::{Backend, Frame, FrameResult, ObjectReport, Output, OutputKind, StatusEntry, TopicProcessor};
+use super::backend::{
+    Backend, Frame, FrameResult, ObjectReport, Output, OutputKind, StatusEntry, TopicProcessor,
+};
 use super::stats::Level;
 use crate::membrane::MembraneConfig;
 use crate::membrane::StopReason;
 use crate::pipeline::engine::{decode_sample, Processed, StreamCloud};
 use crate::pipeline::{outputs, PipelineConfig, StartPath, StreamKey, Tracker};
-use rayon::prelude::*;
-use std::collections::BTreeMap;
 use crate::transport::RosType;
 use crate::wire::msgs::{
     DiagnosticArray, DiagnosticStatus, FrameDiagnostics, Header, KeyValue, MarkerArray,
@@ -24,6 +24,8 @@ use crate::wire::msgs::{
 };
 use crate::wire::pointcloud2::WireConfig;
 use crate::wire::{self, RosMessage};
+use rayon::prelude::*;
+use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 fn ty<M: RosMessage>() -> RosType {
@@ -63,7 +65,12 @@ struct EngineProcessor {
     last_header: Header,
 }
 
-fn encode<M: RosMessage>(kind: OutputKind, msg: &M, out: &mut Vec<Output>, errors: &mut Vec<String>) {
+fn encode<M: RosMessage>(
+    kind: OutputKind,
+    msg: &M,
+    out: &mut Vec<Output>,
+    errors: &mut Vec<String>,
+) {
     match wire::encode(msg) {
         Ok(payload) => out.push(Output { kind, payload }),
         Err(e) => errors.push(format!("encoding {}: {e}", M::TYPE_NAME)),
@@ -72,20 +79,16 @@ fn encode<M: RosMessage>(kind: OutputKind, msg: &M, out: &mut Vec<Output>, error
 
 impl TopicProcessor for EngineProcessor {
     fn process(&mut self, frame: &Frame) -> FrameResult {
-        let mut sample = match decode_sample(
-            &frame.topic,
-            &frame.payload,
-            &self.limits,
-            &self.pipeline,
-        ) {
-            Ok(s) => s,
-            Err(e) => {
-                return FrameResult {
-                    error: Some(e.to_string()),
-                    ..FrameResult::default()
+        let mut sample =
+            match decode_sample(&frame.topic, &frame.payload, &self.limits, &self.pipeline) {
+                Ok(s) => s,
+                Err(e) => {
+                    return FrameResult {
+                        error: Some(e.to_string()),
+                        ..FrameResult::default()
+                    }
                 }
-            }
-        };
+            };
         self.last_header = sample.header.clone();
         let streams = std::mem::take(&mut sample.streams);
         // The node's deadline runs from receipt. The objects of a labelled

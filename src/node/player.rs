@@ -143,7 +143,9 @@ pub async fn play<F: Fn() -> bool>(
             }
             if let Some(p) = pubs.get(&m.topic) {
                 if opts.record_times {
-                    summary.put_times.push((i, crate::transport::attachment::now_ns()));
+                    summary
+                        .put_times
+                        .push((i, crate::transport::attachment::now_ns()));
                 }
                 p.put(m.data.clone()).await?;
                 *summary.per_topic.entry(name(&m.topic)).or_default() += 1;
