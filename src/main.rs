@@ -87,6 +87,9 @@ enum Command {
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
     },
+    /// Benchmark the live node over zenoh loopback: N streams at R Hz with P
+    /// points each; publish→mesh latency percentiles, drops, memory over time.
+    BenchNode(commands::bench_node::BenchNodeArgs),
     /// Publish a bag's PointCloud2 (and other) messages over zenoh as a ROS 2
     /// publisher would (rmw_zenoh keys, attachments, liveliness tokens), with
     /// the recorded timing.
@@ -144,6 +147,7 @@ fn main() -> Result<()> {
             commands::replay::run(&bag, out.as_deref(), &topic, &cfg, quiet)
         }
         Command::Synth(args) => commands::synth::run(&args),
+        Command::BenchNode(args) => commands::bench_node::run(&args),
         Command::Node { config, set } => commands::node::run_node(config.as_deref(), &set),
         Command::Play {
             bag,

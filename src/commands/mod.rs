@@ -1,5 +1,6 @@
 //! One module per `sepmem` subcommand.
 
+pub mod bench_node;
 pub mod config;
 pub mod demo;
 pub mod node;
