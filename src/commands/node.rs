@@ -93,6 +93,9 @@ pub fn run_play(
         let mut tr = cfg.node.transport.clone();
         tr.node_name = format!("{}_player", tr.node_name);
         let p = Participant::open(&tr).await?;
+        // Let the subscriptions of connected peers reach this session first,
+        // so that the first messages are not put before anyone is known.
+        tokio::time::sleep(std::time::Duration::from_millis(500)).await;
         let stop = Arc::new(AtomicBool::new(false));
         let s2 = stop.clone();
         tokio::spawn(async move {
