@@ -183,6 +183,25 @@ impl PointCloud {
             .map(|a| a.values.as_slice())
     }
 
+    /// The colour channels `r`, `g`, `b` (when all three exist) and every
+    /// other channel, in order: how the PLY and PCD writers lay out a cloud.
+    pub fn rgb_and_other_channels(&self) -> (Option<[&[f32]; 3]>, Vec<&Attribute>) {
+        let rgb = match (
+            self.attribute("r"),
+            self.attribute("g"),
+            self.attribute("b"),
+        ) {
+            (Some(r), Some(g), Some(b)) => Some([r, g, b]),
+            _ => None,
+        };
+        let others = self
+            .attributes
+            .iter()
+            .filter(|a| rgb.is_none() || !matches!(a.name.as_str(), "r" | "g" | "b"))
+            .collect();
+        (rgb, others)
+    }
+
     /// Add (or replace) a named attribute channel.
     ///
     /// # Errors

@@ -18,6 +18,7 @@
 //! | [`synth`] | depth-camera simulation of moving meshes (visible side, noise, outliers, labels) |
 //! | [`io`] | PLY / PCD / XYZ / OBJ readers, PLY / OBJ / PCD writers |
 //! | [`density`] | per-point mean k-NN distance, global δ and local δ_R (paper §III-A) |
+//! | [`normals`] | per-point PCA normals (the separability filter's `normal` direction) |
 //! | [`metrics`] | Chamfer, F-score and normal consistency (ONet/SAP protocol), surface sampling |
 //! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
 //! | [`bench`] | `sepmem bench`: the paper's evaluation, reproduced (input conditions, runner, reports) |
@@ -42,6 +43,7 @@ pub mod membrane;
 pub mod mesh;
 pub mod metrics;
 pub mod node;
+pub mod normals;
 pub mod pipeline;
 pub mod separability;
 pub mod shapes;

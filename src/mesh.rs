@@ -144,10 +144,12 @@ impl TriMesh {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn tetra() -> TriMesh {
+    /// A closed, outward-oriented unit tetrahedron (test fixture, also used by
+    /// other modules' tests).
+    pub(crate) fn tetra() -> TriMesh {
         TriMesh {
             vertices: vec![
                 Vec3::new(0.0, 0.0, 0.0),

@@ -3,6 +3,9 @@
 pub mod bench_node;
 pub mod config;
 pub mod demo;
+pub mod eval;
+pub mod filter;
 pub mod node;
+pub mod reconstruct;
 pub mod replay;
 pub mod synth;

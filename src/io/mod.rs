@@ -272,6 +272,24 @@ pub fn save_mesh(path: impl AsRef<Path>, mesh: &TriMesh) -> Result<(), IoError> 
     }
 }
 
+/// Write a point cloud, choosing the writer by extension: `.ply` (binary
+/// little-endian, colour as `red green blue` when the cloud has `r g b`
+/// channels, every other channel as a float property) or `.pcd` (binary).
+///
+/// # Errors
+/// [`IoError`] naming the file and the problem.
+pub fn save_cloud(path: impl AsRef<Path>, cloud: &PointCloud) -> Result<(), IoError> {
+    let path = path.as_ref();
+    match extension(path).as_str() {
+        "ply" => ply::write_cloud(path, cloud),
+        "pcd" => pcd::write_cloud(path, cloud, false),
+        _ => Err(IoError::UnknownFormat {
+            path: path.to_path_buf(),
+            expected: ".ply, .pcd",
+        }),
+    }
+}
+
 /// Drop the non-finite points of a freshly read cloud and build its report.
 pub(crate) fn finish_cloud(mut cloud: PointCloud, width: usize, height: usize) -> LoadedCloud {
     let points_read = cloud.len();

@@ -546,20 +546,8 @@ pub fn read_cloud(path: &Path) -> Result<LoadedCloud, IoError> {
 /// (`0x00RRGGBB`); other channels are written as `F 4` fields.
 pub fn encode_cloud(cloud: &PointCloud, compressed: bool) -> Vec<u8> {
     let n = cloud.len();
-    let rgb = match (
-        cloud.attribute("r"),
-        cloud.attribute("g"),
-        cloud.attribute("b"),
-    ) {
-        (Some(r), Some(g), Some(b)) => Some([r, g, b]),
-        _ => None,
-    };
-    let others: Vec<&Attribute> = cloud
-        .attributes
-        .iter()
-        .filter(|a| rgb.is_none() || !matches!(a.name.as_str(), "r" | "g" | "b"))
-        .filter(|a| a.values.len() == n)
-        .collect();
+    let (rgb, mut others) = cloud.rgb_and_other_channels();
+    others.retain(|a| a.values.len() == n);
     let mut names = vec!["x".to_string(), "y".into(), "z".into()];
     if rgb.is_some() {
         names.push("rgb".into());

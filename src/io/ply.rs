@@ -754,19 +754,7 @@ pub fn encode_cloud(cloud: &PointCloud, path: &Path) -> Result<Vec<u8>, IoError>
             });
         }
     }
-    let rgb = match (
-        cloud.attribute("r"),
-        cloud.attribute("g"),
-        cloud.attribute("b"),
-    ) {
-        (Some(r), Some(g), Some(b)) => Some([r, g, b]),
-        _ => None,
-    };
-    let others: Vec<&Attribute> = cloud
-        .attributes
-        .iter()
-        .filter(|a| rgb.is_none() || !matches!(a.name.as_str(), "r" | "g" | "b"))
-        .collect();
+    let (rgb, others) = cloud.rgb_and_other_channels();
     let mut h = String::from("ply\nformat binary_little_endian 1.0\ncomment written by sepmem\n");
     h.push_str(&format!(
         "element vertex {n}\nproperty float x\nproperty float y\nproperty float z\n"

@@ -14,10 +14,10 @@ pub mod backend;
 #[cfg(feature = "zenoh")]
 pub mod loopback;
 pub mod pipeline_backend;
-#[cfg(feature = "ros2")]
-pub mod ros2;
 #[cfg(feature = "zenoh")]
 pub mod player;
+#[cfg(feature = "ros2")]
+pub mod ros2;
 #[cfg(feature = "zenoh")]
 pub mod runtime;
 pub mod shard;
@@ -139,7 +139,10 @@ pub fn topic_matches(pattern: &str, topic: &str) -> bool {
         }
     }
     let split = |s: &str| -> Vec<String> {
-        s.split('/').filter(|c| !c.is_empty()).map(str::to_string).collect()
+        s.split('/')
+            .filter(|c| !c.is_empty())
+            .map(str::to_string)
+            .collect()
     };
     let (p, t) = (split(pattern), split(topic));
     let p: Vec<&str> = p.iter().map(String::as_str).collect();

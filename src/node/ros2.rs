@@ -20,7 +20,7 @@
 //! then `cargo build --release --features ros2`. CI only type-checks this
 //! module (`--features ros2,r2r/doc-only`, no ROS needed).
 
-use super::backend::{Backend, Frame, OutputKind, StatusEntry, TopicProcessor};
+use super::backend::{Backend, Frame, Output, OutputKind, StatusEntry, TopicProcessor};
 use super::slot::LatestSlot;
 use super::stats::{LatencyWindow, Level};
 use super::{topic_matches, NodeConfig, NodeError};
@@ -59,8 +59,22 @@ struct Stream {
     slot: LatestSlot<Frame>,
     busy: AtomicBool,
     processor: Mutex<Box<dyn TopicProcessor>>,
-    publishers: BTreeMap<OutputKind, r2r::PublisherUntyped>,
     counters: Mutex<Counters>,
+    /// Outputs go back to the spinning thread (r2r publishers are not `Send`).
+    outputs: crossbeam_channel::Sender<(String, Vec<Output>)>,
+}
+
+type Publishers = HashMap<String, BTreeMap<OutputKind, r2r::PublisherUntyped>>;
+
+fn publish_outputs(pubs: &Publishers, topic: &str, outputs: &[Output]) {
+    let Some(p) = pubs.get(topic) else { return };
+    for out in outputs {
+        if let Some(publ) = p.get(&out.kind) {
+            if let Err(e) = publ.publish_raw(&out.payload) {
+                tracing::warn!(%topic, error = %e, "publish failed");
+            }
+        }
+    }
 }
 
 /// Process frames of `s` on the rayon pool until its slot is empty.
@@ -74,18 +88,12 @@ fn drain(s: &Arc<Stream>, pool: &Arc<rayon::ThreadPool>) {
         while let Some(frame) = s.slot.take() {
             let span = tracing::info_span!("frame", topic = %frame.topic, seq = ?frame.sequence);
             let _enter = span.enter();
-            let result = lock(&s.processor).process(&frame);
-            for out in &result.outputs {
-                if let Some(publ) = s.publishers.get(&out.kind) {
-                    if let Err(e) = publ.publish_raw(&out.payload) {
-                        tracing::warn!(topic = %frame.topic, error = %e, "publish failed");
-                    }
-                }
-            }
+            let mut result = lock(&s.processor).process(&frame);
+            let outputs = std::mem::take(&mut result.outputs);
+            let _ = s.outputs.send((frame.topic.clone(), outputs));
             let mut c = lock(&s.counters);
             c.frames += 1;
-            c.latency
-                .push((now_ns() - frame.received_ns) as f64 * 1e-9);
+            c.latency.push((now_ns() - frame.received_ns) as f64 * 1e-9);
             if Instant::now() > frame.deadline {
                 c.late += 1;
             }
@@ -131,7 +139,9 @@ fn statuses(cfg: &NodeConfig, streams: &BTreeMap<String, Arc<Stream>>) -> Vec<St
                 ),
                 None => (
                     Level::Ok,
-                    c.last_error.clone().unwrap_or_else(|| "no object yet".into()),
+                    c.last_error
+                        .clone()
+                        .unwrap_or_else(|| "no object yet".into()),
                     Vec::new(),
                 ),
             };
@@ -202,10 +212,15 @@ pub fn run(
     let spawner = pool_local.spawner();
     let streams: Arc<Mutex<BTreeMap<String, Arc<Stream>>>> = Arc::default();
     let mut subscribed: HashMap<String, ()> = HashMap::new();
+    let mut publishers: Publishers = HashMap::new();
+    let (out_tx, out_rx) = crossbeam_channel::unbounded::<(String, Vec<Output>)>();
     let mut next_tick = Instant::now();
     while !stop.load(Ordering::Relaxed) {
         node.spin_once(Duration::from_millis(10));
         pool_local.run_until_stalled();
+        while let Ok((topic, outs)) = out_rx.try_recv() {
+            publish_outputs(&publishers, &topic, &outs);
+        }
         if Instant::now() < next_tick {
             continue;
         }
@@ -221,7 +236,7 @@ pub fn run(
             {
                 continue;
             }
-            let mut publishers = BTreeMap::new();
+            let mut pubs = BTreeMap::new();
             for kind in OutputKind::ALL {
                 let out = expand_topic_template(cfg.outputs.template(kind), &topic);
                 let p = node
@@ -231,8 +246,9 @@ pub fn run(
                         r2r::QosProfile::default(),
                     )
                     .map_err(ros_err)?;
-                publishers.insert(kind, p);
+                pubs.insert(kind, p);
             }
+            publishers.insert(topic.clone(), pubs);
             let mut sub = node
                 .subscribe_raw(&topic, &input_type, r2r::QosProfile::sensor_data())
                 .map_err(ros_err)?;
@@ -240,8 +256,8 @@ pub fn run(
                 slot: LatestSlot::new(),
                 busy: AtomicBool::new(false),
                 processor: Mutex::new(backend.processor(&topic)),
-                publishers,
                 counters: Mutex::new(Counters::default()),
+                outputs: out_tx.clone(),
             });
             lock(&streams).insert(topic.clone(), stream.clone());
             subscribed.insert(topic.clone(), ());
@@ -276,11 +292,8 @@ pub fn run(
             if silent {
                 tracing::info!(%topic, "evicting silent stream");
                 s.slot.close();
-                for out in lock(&s.processor).on_evict() {
-                    if let Some(p) = s.publishers.get(&out.kind) {
-                        let _ = p.publish_raw(&out.payload);
-                    }
-                }
+                let outs = lock(&s.processor).on_evict();
+                publish_outputs(&publishers, topic, &outs);
             }
             !silent
         });
@@ -300,13 +313,13 @@ pub fn run(
     while map.values().any(|s| s.busy.load(Ordering::Acquire)) && Instant::now() < until {
         std::thread::sleep(Duration::from_millis(10));
     }
+    while let Ok((topic, outs)) = out_rx.try_recv() {
+        publish_outputs(&publishers, &topic, &outs);
+    }
     let mut frames = 0;
-    for s in map.values() {
-        for out in lock(&s.processor).on_evict() {
-            if let Some(p) = s.publishers.get(&out.kind) {
-                let _ = p.publish_raw(&out.payload);
-            }
-        }
+    for (topic, s) in &map {
+        let outs = lock(&s.processor).on_evict();
+        publish_outputs(&publishers, topic, &outs);
         frames += lock(&s.counters).frames;
     }
     let status = statuses(cfg, &map);

@@ -18,7 +18,7 @@ pub mod search;
 pub use attribute::{
     AttributeChannel, AttributeError, AttributeSet, AttributeWeights, ChannelWeight,
 };
-pub use filter::{separability_map, FilterDirection, FilterSize};
+pub use filter::{separability_map, FilterDirection, FilterError, FilterSize};
 pub use grid::{GridError, OrientedBox, SpatialIndex};
 pub use point::{eta_from_counts, non_data_count, point_separability, PointSeparability};
 pub use search::{
@@ -39,6 +39,8 @@ pub struct SeparabilityConfig {
     pub weights: AttributeWeights,
     /// Radius of the local-density attribute, in units of the global δ.
     pub density_radius: f64,
+    /// Neighbours of the PCA normals used by `sepmem filter --direction normal`.
+    pub normal_k: usize,
 }
 
 impl Default for SeparabilityConfig {
@@ -48,6 +50,7 @@ impl Default for SeparabilityConfig {
             local_delta: false,
             weights: AttributeWeights::default(),
             density_radius: 2.0,
+            normal_k: 16,
         }
     }
 }

@@ -140,18 +140,7 @@ pub fn trimesh_from_surface(msg: &SurfaceMesh) -> Result<TriMesh, ConvertError> 
 mod tests {
     use super::*;
 
-    fn tetra() -> TriMesh {
-        TriMesh {
-            vertices: vec![
-                Vec3::new(0.0, 0.0, 0.0),
-                Vec3::new(1.0, 0.0, 0.0),
-                Vec3::new(0.0, 1.0, 0.0),
-                Vec3::new(0.0, 0.0, 1.0),
-            ],
-            triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
-            vertex_scalars: Vec::new(),
-        }
-    }
+    use crate::mesh::tests::tetra;
 
     #[test]
     fn shape_mesh_round_trip_and_marker_layout() {

@@ -1,0 +1,147 @@
+//! Per-point normal estimation by local principal component analysis.
+//!
+//! The normal of a point is the eigenvector of the smallest eigenvalue of the
+//! covariance of its `k` nearest neighbours (itself included), found with the
+//! same `kiddo` kd-tree as the density of paper §III-A. The sign is not
+//! oriented: the separability of two regions (paper Eq. 7) is symmetric in
+//! `r1 ↔ r2`, so the separability filter (`--direction normal`) does not need
+//! it. Runs in parallel over points (rayon).
+
+use crate::cloud::Vec3;
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use nalgebra::{Matrix3, SymmetricEigen};
+use rayon::prelude::*;
+use std::num::NonZero;
+use thiserror::Error;
+
+/// Errors of the normal estimation.
+#[derive(Debug, Error, PartialEq)]
+pub enum NormalsError {
+    /// Fewer than three points: no plane can be fitted.
+    #[error("normal estimation needs at least 3 points, got {got}")]
+    TooFewPoints {
+        /// Points given.
+        got: usize,
+    },
+    /// `k` below 3.
+    #[error("normal estimation needs k >= 3 neighbours, got {k}")]
+    SmallK {
+        /// The `k` given.
+        k: usize,
+    },
+    /// A NaN or infinite coordinate.
+    #[error("point {index} is not finite")]
+    NonFinite {
+        /// Index of the point.
+        index: usize,
+    },
+}
+
+/// Unit normal of every point from its `k` nearest neighbours (`k` is clamped
+/// to the cloud size). A degenerate neighbourhood (all neighbours on one
+/// point) gets the z axis.
+///
+/// # Errors
+/// [`NormalsError`] for fewer than 3 points, `k < 3` or a non-finite point.
+pub fn estimate_normals(points: &[Vec3], k: usize) -> Result<Vec<Vec3>, NormalsError> {
+    if k < 3 {
+        return Err(NormalsError::SmallK { k });
+    }
+    if points.len() < 3 {
+        return Err(NormalsError::TooFewPoints { got: points.len() });
+    }
+    if let Some(index) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        return Err(NormalsError::NonFinite { index });
+    }
+    let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coords);
+    let qty = NonZero::new(k.min(points.len())).unwrap_or(NonZero::<usize>::MIN);
+    Ok(coords
+        .par_iter()
+        .map(|q| {
+            let nn = tree.nearest_n::<SquaredEuclidean>(q, qty);
+            let n = nn.len() as f64;
+            let mut mean = Vec3::zeros();
+            for m in &nn {
+                mean += points[m.item as usize];
+            }
+            mean /= n;
+            let mut cov = Matrix3::<f64>::zeros();
+            for m in &nn {
+                let d = points[m.item as usize] - mean;
+                cov += d * d.transpose();
+            }
+            smallest_eigenvector(cov)
+        })
+        .collect())
+}
+
+/// Unit eigenvector of the smallest eigenvalue of a symmetric 3×3 matrix
+/// (the z axis when the matrix is zero or not finite).
+fn smallest_eigenvector(cov: Matrix3<f64>) -> Vec3 {
+    if !cov.iter().all(|c| c.is_finite()) || cov.abs().max() == 0.0 {
+        return Vec3::z();
+    }
+    let eig = SymmetricEigen::new(cov);
+    let i = eig.eigenvalues.imin();
+    let v: Vec3 = eig.eigenvectors.column(i).into_owned();
+    let norm = v.norm();
+    if norm > 0.0 && norm.is_finite() {
+        v / norm
+    } else {
+        Vec3::z()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sphere_normals_are_radial_and_plane_normals_vertical() {
+        // Fibonacci sphere.
+        let n = 2000;
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        let pts: Vec<Vec3> = (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let r = (1.0 - z * z).sqrt();
+                let t = golden * i as f64;
+                Vec3::new(r * t.cos(), r * t.sin(), z)
+            })
+            .collect();
+        let normals = estimate_normals(&pts, 10).unwrap();
+        let worst = pts
+            .iter()
+            .zip(&normals)
+            .map(|(p, n)| n.dot(p).abs())
+            .fold(1.0f64, f64::min);
+        assert!(worst > 0.98, "least radial normal |cos| = {worst}");
+        let plane: Vec<Vec3> = (0..400)
+            .map(|i| Vec3::new(f64::from(i % 20), f64::from(i / 20), 0.0))
+            .collect();
+        for n in estimate_normals(&plane, 8).unwrap() {
+            assert!((n.z.abs() - 1.0).abs() < 1e-9, "{n:?}");
+        }
+    }
+
+    #[test]
+    fn bad_input_is_a_typed_error() {
+        let p = Vec3::new(0.0, 0.0, 0.0);
+        assert_eq!(
+            estimate_normals(&[p, p], 8),
+            Err(NormalsError::TooFewPoints { got: 2 })
+        );
+        assert_eq!(
+            estimate_normals(&[p, p, p], 2),
+            Err(NormalsError::SmallK { k: 2 })
+        );
+        let nan = Vec3::new(f64::NAN, 0.0, 0.0);
+        assert_eq!(
+            estimate_normals(&[p, p, nan], 3),
+            Err(NormalsError::NonFinite { index: 2 })
+        );
+        // Coincident points: a defined (z) normal, no NaN.
+        assert_eq!(estimate_normals(&[p, p, p], 3).unwrap(), vec![Vec3::z(); 3]);
+    }
+}

@@ -1,0 +1,242 @@
+//! The `sepmem reconstruct`, `filter` and `eval` subcommands, run as the
+//! built binary on files written to a temporary folder: the reconstruction is
+//! scored against the ground truth by `eval`, the filter's PLY is read back.
+#![allow(clippy::unwrap_used)]
+
+use sepmem::cloud::{Attribute, PointCloud, Vec3};
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn sepmem(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sepmem"))
+        .args(args)
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .expect("running sepmem")
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "status {:?}\nstdout:\n{}\nstderr:\n{}",
+        o.status,
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+/// 4,000 points on the ellipsoid shape, plus 5 % scattered outliers and a
+/// NaN point, all mapped by `x ↦ scale·x + offset` (the ground truth too).
+fn ellipsoid_scan(
+    dir: &Path,
+    scale: f64,
+    offset: Vec3,
+) -> (std::path::PathBuf, std::path::PathBuf) {
+    let mut shape = sepmem::shapes::ellipsoid(64).unwrap();
+    for v in &mut shape.mesh.vertices {
+        *v = *v * scale + offset;
+    }
+    let gt = dir.join("gt.ply");
+    sepmem::io::save_mesh(&gt, &shape.mesh).unwrap();
+    let s = sepmem::metrics::sample_surface(&shape.mesh, 4000, 7).unwrap();
+    let mut pts = s.points.clone();
+    // Deterministic scattered outliers in the enlarged bounding box.
+    let mut x = 0x2545_f491_4f6c_dd1du64;
+    let mut rnd = || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    for _ in 0..200 {
+        pts.push(Vec3::new(1.2 * rnd(), 1.2 * rnd(), 1.2 * rnd()) * scale + offset);
+    }
+    pts.push(Vec3::new(f64::NAN, 0.0, 0.0));
+    let cloud_path = dir.join("scan.ply");
+    let cloud = PointCloud::from_points(pts);
+    sepmem::io::save_cloud(&cloud_path, &cloud).unwrap();
+    (cloud_path, gt)
+}
+
+/// Reconstruct `scan`, check the output mesh (watertight, outward) and
+/// return its F-score against `gt` (by `sepmem eval`) and the summary line.
+fn reconstruct_and_score(dir: &Path, scan: &Path, gt: &Path) -> (f64, String) {
+    let mesh = dir.join("mesh.ply");
+    let o = sepmem(&["reconstruct", p(scan), "-o", p(&mesh)]);
+    assert!(o.status.success(), "{}", text(&o));
+    let line = String::from_utf8_lossy(&o.stdout).to_string();
+    let loaded = sepmem::io::load_mesh(&mesh).unwrap();
+    assert!(loaded.mesh.topology().is_watertight());
+    assert!(loaded.mesh.signed_volume() > 0.0);
+    let o = sepmem(&[
+        "eval",
+        "--pred",
+        p(&mesh),
+        "--gt",
+        p(gt),
+        "--json",
+        "--set",
+        "metrics.samples=30000",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let m: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(m["samples"].as_u64(), Some(30000));
+    (m["fscore"].as_f64().unwrap(), line)
+}
+
+#[test]
+fn any_unit_and_position_gives_the_same_reconstruction() {
+    // The same object in metres at the origin, in millimetres far away, and
+    // 100 times smaller: lengths in the config are relative to the object.
+    let mut scores = Vec::new();
+    for (scale, offset) in [
+        (1.0, Vec3::zeros()),
+        (1000.0, Vec3::new(2.5e4, -1.0e4, 3.0e3)),
+        (0.01, Vec3::new(0.3, 0.2, 0.1)),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let (scan, gt) = ellipsoid_scan(dir.path(), scale, offset);
+        scores.push(reconstruct_and_score(dir.path(), &scan, &gt).0);
+    }
+    assert!(scores.iter().all(|&f| f >= 0.95), "F-scores {scores:?}");
+    let spread =
+        scores.iter().cloned().fold(0.0, f64::max) - scores.iter().cloned().fold(1.0, f64::min);
+    assert!(spread < 0.02, "F-scores {scores:?} depend on the unit");
+}
+
+#[test]
+fn reconstruct_then_eval_scores_the_mesh_against_ground_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scan, gt) = ellipsoid_scan(dir.path(), 1.0, Vec3::zeros());
+    let (f, line) = reconstruct_and_score(dir.path(), &scan, &gt);
+    assert_eq!(line.lines().count(), 1, "one summary line: {line}");
+    for key in [
+        "points in",
+        "used",
+        "dropped",
+        "grid",
+        "iterations",
+        "eta_g",
+        "stop",
+        "ms",
+    ] {
+        assert!(line.contains(key), "summary lacks `{key}`: {line}");
+    }
+    assert!(f >= 0.95, "F-score {f} of the reconstruction");
+    // The ground truth against itself scores F = 1 in the table output.
+    let o = sepmem(&[
+        "eval",
+        "--pred",
+        p(&gt),
+        "--gt",
+        p(&gt),
+        "--set",
+        "metrics.samples=20000",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let out = String::from_utf8_lossy(&o.stdout).to_string();
+    let self_f: f64 = out
+        .lines()
+        .find_map(|l| l.strip_prefix("fscore"))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no fscore line: {out}"));
+    // Sampling noise only (20k samples per mesh at τ = 0.01).
+    assert!(self_f > 0.97, "{out}");
+}
+
+#[test]
+fn filter_writes_a_coloured_separability_map() {
+    let dir = tempfile::tempdir().unwrap();
+    // Two stacked sheets of different density with a luma edge: the map must
+    // peak near the density step and stay low on the flat regions.
+    let mut pts = Vec::new();
+    let mut luma = Vec::new();
+    for i in 0..60 {
+        for j in 0..60 {
+            let (x, y) = (f64::from(i) * 0.01, f64::from(j) * 0.01);
+            if x < 0.3 || (i + j) % 2 == 0 {
+                pts.push(Vec3::new(x, y, 0.0));
+                luma.push(if y < 0.3 { 0.1 } else { 0.9 });
+            }
+        }
+    }
+    let mut cloud = PointCloud::from_points(pts);
+    cloud.attributes.push(Attribute {
+        name: "intensity".into(),
+        values: luma,
+    });
+    let input = dir.path().join("sheet.ply");
+    sepmem::io::save_cloud(&input, &cloud).unwrap();
+    for direction in ["x", "all", "normal"] {
+        let out = dir.path().join(format!("map_{direction}.ply"));
+        let o = sepmem(&[
+            "filter",
+            p(&input),
+            "-o",
+            p(&out),
+            "--direction",
+            direction,
+            "--size",
+            "6d,0.02,6d",
+            "--set",
+            "separability.weights.intensity=1",
+        ]);
+        assert!(o.status.success(), "{}", text(&o));
+        let map = sepmem::io::load_cloud(&out).unwrap().cloud;
+        assert_eq!(map.len(), cloud.len());
+        let sep = map
+            .attribute("separability")
+            .expect("separability property");
+        assert!(map.attribute("r").is_some(), "colour properties");
+        assert!(sep.iter().all(|v| (0.0..=1.0).contains(v)));
+        if direction == "normal" {
+            continue; // a flat sheet: its normal split sees no boundary to peak at
+        }
+        let near = |f: &dyn Fn(&Vec3) -> bool| {
+            map.points
+                .iter()
+                .zip(sep)
+                .filter(|(q, _)| f(q) && q.y > 0.05 && q.y < 0.55 && q.x > 0.05 && q.x < 0.55)
+                .map(|(_, &v)| v)
+                .fold(0.0f32, f32::max)
+        };
+        let step = near(&|q| (q.x - 0.3).abs() < 0.02);
+        let flat = near(&|q| (q.x - 0.15).abs() < 0.05 && (q.y - 0.3).abs() > 0.05);
+        assert!(
+            step > 2.0 * flat + 0.02,
+            "{direction}: step {step} flat {flat}"
+        );
+    }
+}
+
+#[test]
+fn bad_input_fails_with_a_message_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("broken.ply");
+    std::fs::write(
+        &bad,
+        b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n1 2\n",
+    )
+    .unwrap();
+    let out = dir.path().join("o.ply");
+    for args in [
+        vec!["reconstruct", p(&bad), "-o", p(&out)],
+        vec!["filter", p(&bad), "-o", p(&out)],
+        vec!["eval", "--pred", p(&bad), "--gt", p(&bad)],
+    ] {
+        let o = sepmem(&args);
+        assert!(!o.status.success(), "{}", text(&o));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains("broken.ply"), "{}", text(&o));
+        assert!(!err.contains("panicked"), "{}", text(&o));
+    }
+    let o = sepmem(&["filter", p(&bad), "-o", p(&out), "--size=-3"]);
+    assert!(
+        !o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--size"),
+        "{}",
+        text(&o)
+    );
+}
