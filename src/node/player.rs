@@ -8,12 +8,22 @@
 
 use crate::bag::{Bag, BagError, BagMessage};
 use crate::transport::keys::HASH_NOT_SUPPORTED;
-use crate::transport::liveliness::Qos;
+use crate::transport::liveliness::{Durability, Qos, Reliability};
 use crate::transport::{Participant, RosPublisher, RosType, TransportError};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::{Duration, Instant};
 use thiserror::Error;
+
+/// The players' QoS: reliable, keep all. Over zenoh this maps to blocking
+/// congestion control, so that a burst of large clouds (several topics
+/// recorded at the same instant) is not dropped by the sender; the node's
+/// keep-latest slots still bound what is processed.
+pub const PLAYER_QOS: Qos = Qos {
+    reliability: Reliability::Reliable,
+    durability: Durability::Volatile,
+    keep_last: None,
+};
 
 /// Errors of the player.
 #[derive(Debug, Error)]
@@ -123,7 +133,7 @@ pub async fn play<F: Fn() -> bool>(
                 .cloned()
                 .unwrap_or_else(|| RosType::new(m.type_name.clone(), HASH_NOT_SUPPORTED));
             let p = participant
-                .publisher(&name(&m.topic), &ty, Qos::SENSOR_DATA)
+                .publisher(&name(&m.topic), &ty, PLAYER_QOS)
                 .await?;
             pubs.insert(m.topic.clone(), p);
         }
