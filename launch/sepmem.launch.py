@@ -19,7 +19,7 @@ Arguments (defaults are those of launch/sepmem.json5):
   node_name     ROS node name
   shard_index   this instance's shard index
   shard_count   number of instances sharing the streams
-  deadline_ms   per-frame deadline
+  deadline_ms   per-frame deadline in ms from receipt (pipeline.deadline_ms)
   log           tracing filter (e.g. info, sepmem=debug)
 """
 
@@ -50,7 +50,7 @@ KEYS = {
     "node_name": "node.transport.node_name",
     "shard_index": "node.shard.index",
     "shard_count": "node.shard.count",
-    "deadline_ms": "node.deadline_ms",
+    "deadline_ms": "pipeline.deadline_ms",
 }
 
 

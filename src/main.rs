@@ -95,12 +95,19 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Demo: replay the bundled sample bags through the pipeline and write
-    /// meshes (PLY) and output bags to a folder. Needs no router or ROS.
+    /// Demo: start the live node and a bag player on zenoh over loopback,
+    /// replay the bundled sample bags, and write the received meshes (PLY)
+    /// and output bags to a folder. Needs no router or ROS.
     Demo {
         /// Output folder.
         #[arg(short, long, default_value = "demo-out")]
         out: PathBuf,
+        /// Speed factor of the replay (1 = recorded timing).
+        #[arg(long, default_value_t = 1.0)]
+        rate: f64,
+        /// Configuration file (.json5 or .toml) holding the keys to change.
+        #[arg(long)]
+        config: Option<PathBuf>,
         /// Override one parameter: section.key=value (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
@@ -130,6 +137,42 @@ enum Command {
         /// Shared datasets directory (default: $SEPMEM_DATASETS, else ../shared/datasets).
         #[arg(long)]
         datasets: Option<PathBuf>,
+    },
+    /// Run the live node: subscribe to PointCloud2 topics over zenoh
+    /// (rmw_zenoh keys by default), publish meshes, markers and diagnostics,
+    /// until SIGINT/SIGTERM.
+    Node {
+        /// Configuration file (.json5 or .toml) holding the keys to change.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Override one parameter: section.key=value (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+    },
+    /// Benchmark the live node over zenoh loopback: N streams at R Hz with P
+    /// points each; publish→mesh latency percentiles, drops, memory over time.
+    BenchNode(commands::bench_node::BenchNodeArgs),
+    /// Publish a bag's PointCloud2 (and other) messages over zenoh as a ROS 2
+    /// publisher would (rmw_zenoh keys, attachments, liveliness tokens), with
+    /// the recorded timing.
+    Play {
+        /// Input bag: a `.mcap` file, a `.db3` file or a bag directory.
+        bag: PathBuf,
+        /// Speed factor (2 = twice as fast; 0 = as fast as possible).
+        #[arg(long, default_value_t = 1.0)]
+        rate: f64,
+        /// Start again at the end, until interrupted.
+        #[arg(long = "loop")]
+        looped: bool,
+        /// Only play these topics (repeatable; default: all).
+        #[arg(long)]
+        topic: Vec<String>,
+        /// Configuration file (transport settings: node.transport.*).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Override one parameter: section.key=value (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
     },
 }
 
@@ -169,9 +212,14 @@ fn main() -> Result<()> {
             set,
             json,
         } => commands::eval::run(&pred, &gt, config.as_deref(), &set, json),
-        Command::Demo { out, set } => {
-            let cfg = sepmem::config::Config::load(None, &set)?;
-            commands::demo::run(&out, &cfg)
+        Command::Demo {
+            out,
+            rate,
+            config,
+            set,
+        } => {
+            let cfg = sepmem::config::Config::load(config.as_deref(), &set)?;
+            commands::demo::run(&out, &cfg, rate)
         }
         Command::Replay(args) => commands::replay::run_args(&args),
         Command::Synth(args) => commands::synth::run(&args),
@@ -181,5 +229,15 @@ fn main() -> Result<()> {
             only,
             datasets,
         } => commands::bench::run(quick, &out, &only, datasets),
+        Command::BenchNode(args) => commands::bench_node::run(&args),
+        Command::Node { config, set } => commands::node::run_node(config.as_deref(), &set),
+        Command::Play {
+            bag,
+            rate,
+            looped,
+            topic,
+            config,
+            set,
+        } => commands::node::run_play(&bag, rate, looped, &topic, config.as_deref(), &set),
     }
 }

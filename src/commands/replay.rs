@@ -24,6 +24,7 @@ use sepmem::pipeline::engine::{decode_sample, Engine};
 use sepmem::pipeline::score::{score_frame, FrameScore, ScoreConfig};
 use sepmem::pipeline::{cold_cap, outputs, thinned, StartPath};
 use sepmem::synth::truth::GroundTruthIndex;
+use sepmem::transport::keys::expand_topic_template;
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -115,27 +116,6 @@ pub struct Outputs<'a> {
     pub meshes: Option<&'a Path>,
 }
 
-/// Replay `bag` into the given outputs (scoring frames when the bag has ground truth).
-pub fn run_with(
-    bag_path: &Path,
-    outputs_to: Outputs<'_>,
-    topics: &[String],
-    cfg: &Config,
-    quiet: bool,
-) -> Result<()> {
-    run_opts(
-        bag_path,
-        outputs_to,
-        topics,
-        cfg,
-        Options {
-            quiet,
-            score: true,
-            compare_cold: false,
-        },
-    )
-}
-
 /// Replay `bag` into the given outputs with the given options.
 pub fn run_opts(
     bag_path: &Path,
@@ -185,6 +165,7 @@ pub fn run_opts(
         .transpose()?;
     let mut engine = Engine::new(cfg.membrane.clone(), cfg.pipeline.clone(), cfg.wire.clone());
     let p = &cfg.pipeline;
+    let o = &cfg.node.outputs;
 
     let bar = if std::io::stderr().is_terminal() && !quiet {
         let b = ProgressBar::new(messages.len() as u64);
@@ -326,12 +307,12 @@ pub fn run_opts(
         if let Some(w) = writer.as_mut() {
             for r in &ok {
                 w.write(
-                    &p.mesh_topic,
+                    &expand_topic_template(&o.mesh, &m.topic),
                     m.log_time,
                     &outputs::surface_mesh(r, &sample.header),
                 )?;
                 w.write(
-                    &p.frame_diagnostics_topic,
+                    &expand_topic_template(&o.frame_diagnostics, &m.topic),
                     m.log_time,
                     &outputs::frame_diagnostics(
                         r,
@@ -342,7 +323,7 @@ pub fn run_opts(
                 )?;
             }
             w.write(
-                &p.markers_topic,
+                &expand_topic_template(&o.markers, &m.topic),
                 m.log_time,
                 &outputs::marker_array(&ok, &sample.header, &p.marker_namespace),
             )?;

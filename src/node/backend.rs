@@ -11,7 +11,7 @@
 
 use super::stats::Level;
 use crate::transport::RosType;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// The per-frame outputs a processor can produce.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -122,6 +122,10 @@ pub trait Backend: Send + Sync + 'static {
     fn output_type(&self, kind: OutputKind) -> RosType;
     /// `diagnostic_msgs/msg/DiagnosticArray`.
     fn diagnostics_type(&self) -> RosType;
+    /// Per-frame deadline, measured from receipt (`None`: no deadline).
+    fn frame_deadline(&self) -> Option<Duration> {
+        None
+    }
     /// A fresh processor for a newly seen input topic.
     fn processor(&self, topic: &str) -> Box<dyn TopicProcessor>;
     /// Encode a `DiagnosticArray` stamped `stamp_ns`.

@@ -12,6 +12,13 @@
 
 pub mod backend;
 #[cfg(feature = "zenoh")]
+pub mod loopback;
+pub mod pipeline_backend;
+#[cfg(feature = "zenoh")]
+pub mod player;
+#[cfg(feature = "ros2")]
+pub mod ros2;
+#[cfg(feature = "zenoh")]
 pub mod runtime;
 pub mod shard;
 pub mod slot;
@@ -20,6 +27,7 @@ pub mod stats;
 pub use backend::{
     Backend, Frame, FrameResult, ObjectReport, Output, OutputKind, StatusEntry, TopicProcessor,
 };
+pub use pipeline_backend::PipelineBackend;
 pub use shard::Shard;
 pub use stats::Level;
 
@@ -39,6 +47,9 @@ pub enum NodeError {
     /// Invalid node settings.
     #[error("invalid node configuration: {0}")]
     Config(String),
+    /// ROS 2 (r2r / rcl) failure.
+    #[error("ROS 2: {0}")]
+    Ros(String),
     /// The compute pool could not be created.
     #[error("cannot create the compute thread pool: {0}")]
     Pool(String),
@@ -77,8 +88,6 @@ pub struct NodeConfig {
     pub topics: Vec<String>,
     /// Output topic names.
     pub outputs: OutputTopics,
-    /// Per-frame deadline from receipt, in milliseconds.
-    pub deadline_ms: u64,
     /// Period of the `/diagnostics` array, in milliseconds.
     pub diagnostics_period_ms: u64,
     /// A stream silent this long is evicted (state freed, reported STALE).
@@ -114,5 +123,46 @@ impl NodeConfig {
             return Err(NodeError::Config("node.max_streams must be > 0".into()));
         }
         Ok(())
+    }
+}
+
+/// Whether a ROS topic matches a `node.topics` pattern: `*` matches one name
+/// component, `**` any number (zero included), as in zenoh key expressions.
+pub fn topic_matches(pattern: &str, topic: &str) -> bool {
+    fn rec(p: &[&str], t: &[&str]) -> bool {
+        match (p.first(), t.first()) {
+            (None, None) => true,
+            (Some(&"**"), _) => rec(&p[1..], t) || (!t.is_empty() && rec(p, &t[1..])),
+            (Some(&"*"), Some(_)) => rec(&p[1..], &t[1..]),
+            (Some(a), Some(b)) if a == b => rec(&p[1..], &t[1..]),
+            _ => false,
+        }
+    }
+    let split = |s: &str| -> Vec<String> {
+        s.split('/')
+            .filter(|c| !c.is_empty())
+            .map(str::to_string)
+            .collect()
+    };
+    let (p, t) = (split(pattern), split(topic));
+    let p: Vec<&str> = p.iter().map(String::as_str).collect();
+    let t: Vec<&str> = t.iter().map(String::as_str).collect();
+    rec(&p, &t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::topic_matches;
+
+    #[test]
+    fn topic_patterns_match_like_key_expressions() {
+        assert!(topic_matches("/seg/**", "/seg/a/points"));
+        assert!(topic_matches("/seg/**", "/seg"));
+        assert!(topic_matches("/seg/*/points", "/seg/a/points"));
+        assert!(!topic_matches("/seg/*/points", "/seg/a/b/points"));
+        assert!(topic_matches("/**/points", "/a/b/points"));
+        assert!(!topic_matches("/seg/**", "/other/points"));
+        assert!(topic_matches("/exact", "/exact/"));
+        assert!(!topic_matches("/exact", "/exactly"));
     }
 }

@@ -166,7 +166,10 @@ where
         ignored: Ignored::default(),
         cfg: cfg.clone(),
     });
-    let deadline = Duration::from_millis(cfg.deadline_ms);
+    // No deadline: a day is as good as none, and keeps `Frame::deadline` an Instant.
+    let deadline = backend
+        .frame_deadline()
+        .unwrap_or(Duration::from_secs(86_400));
 
     let input_type = cfg.transport.advertised(&backend.input_type());
     let mut subscribers = Vec::new();

@@ -60,6 +60,14 @@ impl<T> LatestSlot<T> {
         true
     }
 
+    /// Whether an item is waiting to be taken.
+    pub fn has_pending(&self) -> bool {
+        match self.pending.lock() {
+            Ok(g) => g.is_some(),
+            Err(poisoned) => poisoned.into_inner().is_some(),
+        }
+    }
+
     /// Take the pending item, if any.
     pub fn take(&self) -> Option<T> {
         match self.pending.lock() {

@@ -56,7 +56,8 @@ pub struct PipelineConfig {
     pub warm_max_iterations: usize,
     /// Iteration cap for a cold frame (0: the membrane's own `max_iterations`).
     pub cold_max_iterations: usize,
-    /// Wall-clock budget per frame in ms, shared by all attempts (0: none).
+    /// Wall-clock budget per frame in ms, shared by all attempts (0: none);
+    /// the live node measures it from the sample's receipt.
     pub deadline_ms: f64,
     /// Cold start when the centroid moved more than this fraction of the object size.
     pub max_motion: f64,
@@ -70,12 +71,6 @@ pub struct PipelineConfig {
     pub icp_trim: f64,
     /// At most this many new points per ICP step.
     pub icp_max_points: usize,
-    /// Output topic of sepmem's stamped mesh (`sepmem_msgs/msg/SurfaceMesh`).
-    pub mesh_topic: String,
-    /// Output topic of the RViz/Foxglove markers (`visualization_msgs/msg/MarkerArray`).
-    pub markers_topic: String,
-    /// Output topic of the per-frame diagnostics (`sepmem_msgs/msg/FrameDiagnostics`).
-    pub frame_diagnostics_topic: String,
     /// Marker namespace.
     pub marker_namespace: String,
     /// Samples per mesh queried when replay scores a frame against ground truth.
@@ -103,9 +98,6 @@ impl Default for PipelineConfig {
             icp_steps: 5,
             icp_trim: 0.1,
             icp_max_points: 1000,
-            mesh_topic: "/sepmem/mesh".into(),
-            markers_topic: "/sepmem/markers".into(),
-            frame_diagnostics_topic: "/sepmem/frame_diagnostics".into(),
             marker_namespace: "sepmem".into(),
             score_samples: 10_000,
             score_visible_radius: 0.02,

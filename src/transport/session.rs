@@ -12,7 +12,7 @@
 
 use super::attachment::{gid_of_liveliness_key, now_ns, Attachment, AttachmentError};
 use super::keys::{KeyError, KeyMapper, KeyMode, RosType};
-use super::liveliness::{EntityKind, Qos, Token, TopicToken};
+use super::liveliness::{EntityKind, Qos, Reliability, Token, TopicToken};
 use super::{TransportConfig, TransportError};
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -251,9 +251,17 @@ impl Participant {
             .declare_entity(EntityKind::Publisher, topic, ty, qos)
             .await?;
         let gid = gid_of_liveliness_key(token.key());
+        // rmw_zenoh's mapping: RELIABLE + KEEP_ALL blocks under congestion,
+        // everything else drops (see `rmw_publisher_data.cpp`).
+        let congestion = if qos.reliability == Reliability::Reliable && qos.keep_last.is_none() {
+            zenoh::qos::CongestionControl::Block
+        } else {
+            zenoh::qos::CongestionControl::Drop
+        };
         let publisher = self
             .session
             .declare_publisher(key.clone())
+            .congestion_control(congestion)
             .await
             .map_err(zerr(format!("declaring publisher {key}")))?;
         Ok(RosPublisher {

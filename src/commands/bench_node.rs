@@ -1,0 +1,315 @@
+//! `sepmem bench-node`: the live node under a synthetic load, in one process
+//! over zenoh loopback. N object streams publish PointCloud2 at R Hz with P
+//! points each (a moving, slightly noisy ellipsoid surface per stream, at a
+//! different size per stream) for a duration; an observer receives the
+//! meshes. It reports publish→mesh-receipt latency percentiles (the cloud's
+//! header stamp is its publish time, same clock), frames, drops and the
+//! process's resident memory over time.
+
+use super::replay::percentile;
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use sepmem::cloud::{PointCloud, Vec3};
+use sepmem::config::Config;
+use sepmem::metrics::sample_surface;
+use sepmem::node::loopback::LoopbackNode;
+use sepmem::node::PipelineBackend;
+use sepmem::transport::attachment::now_ns;
+use sepmem::transport::liveliness::Qos;
+use sepmem::transport::RosType;
+use sepmem::wire::msgs::{Header, PointCloud2, SurfaceMesh, Time};
+use sepmem::wire::pointcloud2::encode_pointcloud2;
+use sepmem::wire::{self, RosMessage};
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// Arguments of `sepmem bench-node`.
+#[derive(Args, Debug)]
+pub struct BenchNodeArgs {
+    /// Concurrent object streams.
+    #[arg(long, default_value_t = 4)]
+    pub streams: usize,
+    /// Publication rate per stream (Hz).
+    #[arg(long, default_value_t = 30.0)]
+    pub rate: f64,
+    /// Points per cloud.
+    #[arg(long, default_value_t = 20_000)]
+    pub points: usize,
+    /// Duration of the measurement (s).
+    #[arg(long, default_value_t = 120.0)]
+    pub duration: f64,
+    /// Warm-up excluded from the latency figures (s).
+    #[arg(long, default_value_t = 3.0)]
+    pub warmup: f64,
+    /// Resident-memory sampling period (s).
+    #[arg(long, default_value_t = 10.0)]
+    pub rss_every: f64,
+    /// Write the figures as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Configuration file (.json5 or .toml) holding the keys to change.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Override one parameter: section.key=value (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+}
+
+/// Resident set size of this process in MiB (Linux; `None` elsewhere).
+fn rss_mib() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmRSS:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
+
+/// Pre-encoded frames of one stream: the ellipsoid moved along a small
+/// circle; the stamp is patched at publish time.
+fn stream_frames(index: usize, points: usize, frames: usize) -> Result<Vec<Vec<u8>>> {
+    let shape = sepmem::shapes::ellipsoid(24)?;
+    let scale = 0.1 + 0.05 * index as f64;
+    let samples = sample_surface(&shape.mesh, points, 1 + index as u64)?;
+    let mut out = Vec::with_capacity(frames);
+    for k in 0..frames {
+        let a = std::f64::consts::TAU * k as f64 / frames as f64;
+        let offset = Vec3::new(0.5 * index as f64 + 0.01 * a.cos(), 0.01 * a.sin(), 1.0);
+        let pts: Vec<Vec3> = samples
+            .points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                // Deterministic ±0.5 mm jitter (sensor-like noise).
+                let j = ((i * 7919 + k * 104_729) % 1000) as f64 / 1000.0 - 0.5;
+                p * scale + offset + Vec3::repeat(j * 1e-3)
+            })
+            .collect();
+        let msg = encode_pointcloud2(
+            &PointCloud::from_points(pts),
+            Header {
+                stamp: Time::from_nanos(0),
+                frame_id: "bench".into(),
+            },
+        );
+        out.push(wire::encode(&msg)?);
+    }
+    Ok(out)
+}
+
+/// The stamp of a CDR message whose first field is a `std_msgs/Header`.
+fn stamp_of(cdr: &[u8]) -> Option<i64> {
+    let sec = i32::from_le_bytes(cdr.get(4..8)?.try_into().ok()?);
+    let nsec = u32::from_le_bytes(cdr.get(8..12)?.try_into().ok()?);
+    Some(i64::from(sec) * 1_000_000_000 + i64::from(nsec))
+}
+
+fn set_stamp(cdr: &mut [u8], ns: i64) {
+    let t = Time::from_nanos(ns);
+    cdr[4..8].copy_from_slice(&t.sec.to_le_bytes());
+    cdr[8..12].copy_from_slice(&t.nanosec.to_le_bytes());
+}
+
+#[derive(Default)]
+struct Receipts {
+    /// (receipt ns, latency ms, stream index)
+    meshes: Vec<(i64, f64, usize)>,
+}
+
+/// Run the benchmark.
+pub fn run(args: &BenchNodeArgs) -> Result<()> {
+    if args.streams == 0 || args.rate <= 0.0 || args.points < 100 || args.duration <= 0.0 {
+        bail!("need --streams ≥ 1, --rate > 0, --points ≥ 100, --duration > 0");
+    }
+    let cfg = Config::load(args.config.as_deref(), &args.set)?;
+    let mut node_cfg = cfg.node.clone();
+    node_cfg.topics = vec!["/bench/**".into()];
+    node_cfg.transport.node_name = "sepmem_bench".into();
+    let frames_per_stream = 30;
+    eprintln!(
+        "encoding {} × {frames_per_stream} clouds of {} points …",
+        args.streams, args.points
+    );
+    let mut payloads = Vec::new();
+    for s in 0..args.streams {
+        payloads.push(stream_frames(s, args.points, frames_per_stream)?);
+    }
+    let backend = Arc::new(PipelineBackend::from_config(&cfg));
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting tokio")?;
+    let args_rate = args.rate;
+    rt.block_on(async move {
+        let node = LoopbackNode::start(&node_cfg, backend).await?;
+        let receipts: Arc<Mutex<Receipts>> = Arc::default();
+        let r2 = receipts.clone();
+        let _sub = node
+            .harness
+            .subscribe(
+                "/bench/**",
+                &RosType::new(SurfaceMesh::TYPE_NAME, SurfaceMesh::TYPE_HASH),
+                move |s| {
+                    let (Some(stamp), Ok(topic)) = (stamp_of(&s.payload), &s.topic) else {
+                        return;
+                    };
+                    let idx = topic
+                        .trim_start_matches("/bench/s")
+                        .split('/')
+                        .next()
+                        .and_then(|n| n.parse::<usize>().ok())
+                        .unwrap_or(usize::MAX);
+                    let lat = (s.received_ns - stamp) as f64 * 1e-6;
+                    if let Ok(mut r) = r2.lock() {
+                        r.meshes.push((s.received_ns, lat, idx));
+                    }
+                },
+            )
+            .await?;
+        if !node.wait_ready(Duration::from_secs(30)).await {
+            bail!("the node did not come up on loopback");
+        }
+        let mut pubs = Vec::new();
+        for s in 0..args.streams {
+            pubs.push(
+                node.harness
+                    .publisher(
+                        &format!("/bench/s{s}/points"),
+                        &RosType::new(PointCloud2::TYPE_NAME, PointCloud2::TYPE_HASH),
+                        Qos::SENSOR_DATA,
+                    )
+                    .await?,
+            );
+        }
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        println!(
+            "bench-node: {} streams × {} Hz × {} points for {} s (warm-up {} s), deadline {} ms, compute threads {}",
+            args.streams,
+            args_rate,
+            args.points,
+            args.duration,
+            args.warmup,
+            cfg.pipeline.deadline_ms,
+            if node_cfg.compute_threads == 0 {
+                std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
+            } else {
+                node_cfg.compute_threads
+            }
+        );
+        let t0 = now_ns();
+        let end = t0 + (args.duration * 1e9) as i64;
+        let measure_from = t0 + (args.warmup * 1e9) as i64;
+        let published = Arc::new(std::sync::atomic::AtomicU64::new(0));
+        let mut tasks = Vec::new();
+        for (s, (p, frames)) in pubs.into_iter().zip(payloads).enumerate() {
+            let published = published.clone();
+            let n_streams = args.streams;
+            tasks.push(tokio::spawn(async move {
+                let period = Duration::from_secs_f64(1.0 / args_rate);
+                // Stagger the streams over one period.
+                tokio::time::sleep(period.mul_f64(s as f64 / n_streams as f64)).await;
+                let mut tick = tokio::time::interval(period);
+                tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+                let mut k = 0usize;
+                while now_ns() < end {
+                    tick.tick().await;
+                    let mut bytes = frames[k % frames.len()].clone();
+                    set_stamp(&mut bytes, now_ns());
+                    if p.put(bytes).await.is_ok() {
+                        published.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    }
+                    k += 1;
+                }
+                p
+            }));
+        }
+        let mut rss = vec![(0.0, rss_mib().unwrap_or(f64::NAN))];
+        let every = Duration::from_secs_f64(args.rss_every.max(0.5));
+        while now_ns() < end {
+            tokio::time::sleep(every.min(Duration::from_nanos(
+                u64::try_from(end - now_ns()).unwrap_or(0).max(1),
+            )))
+            .await;
+            let t = (now_ns() - t0) as f64 * 1e-9;
+            let m = rss_mib().unwrap_or(f64::NAN);
+            let n = receipts.lock().map(|r| r.meshes.len()).unwrap_or(0);
+            println!("  t={t:6.1} s  rss {m:7.1} MiB  meshes received {n}");
+            rss.push((t, m));
+        }
+        let mut pubs = Vec::new();
+        for t in tasks {
+            pubs.push(t.await?);
+        }
+        tokio::time::sleep(Duration::from_millis(1500)).await;
+        for p in pubs {
+            p.undeclare().await?;
+        }
+        let summary = node.stop().await?;
+        let r = receipts.lock().map(|r| r.meshes.clone()).unwrap_or_default();
+        let mut lat: Vec<f64> = r
+            .iter()
+            .filter(|(t, _, _)| *t >= measure_from)
+            .map(|(_, l, _)| *l)
+            .collect();
+        lat.sort_by(f64::total_cmp);
+        let published = published.load(std::sync::atomic::Ordering::Relaxed);
+        let frames: u64 = summary.streams.iter().map(|s| s.frames).sum();
+        let drops: u64 = summary.streams.iter().map(|s| s.drops).sum();
+        let late: u64 = summary.streams.iter().map(|s| s.late).sum();
+        let received: u64 = summary.streams.iter().map(|s| s.received).sum();
+        println!(
+            "\n{:<22} {:>9} {:>7} {:>7} {:>6} {:>6} {:>6} {:>8} {:>8}",
+            "stream", "received", "frames", "drops", "late", "warm", "cold", "p50 ms", "p95 ms"
+        );
+        let ms = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |x| format!("{:.1}", x * 1e3));
+        for s in &summary.streams {
+            println!(
+                "{:<22} {:>9} {:>7} {:>7} {:>6} {:>6} {:>6} {:>8} {:>8}",
+                s.topic,
+                s.received,
+                s.frames,
+                s.drops,
+                s.late,
+                s.warm,
+                s.cold,
+                ms(s.p50_s),
+                ms(s.p95_s)
+            );
+        }
+        let rss_first = rss.get(1).map_or(f64::NAN, |x| x.1);
+        let rss_last = rss.last().map_or(f64::NAN, |x| x.1);
+        let rss_max = rss.iter().map(|x| x.1).fold(f64::NAN, f64::max);
+        let p50 = percentile(&lat, 0.5);
+        let p95 = percentile(&lat, 0.95);
+        let p99 = percentile(&lat, 0.99);
+        let mesh_rate = lat.len() as f64 / (args.duration - args.warmup).max(1e-9);
+        println!(
+            "\nsummary: published {published}, received by the node {received}, processed {frames}, dropped (keep-latest) {drops} ({:.1} %), late {late}; meshes received {} ({mesh_rate:.1}/s after warm-up)",
+            100.0 * drops as f64 / received.max(1) as f64,
+            r.len()
+        );
+        println!(
+            "publish→mesh-receipt latency ms (after warm-up, {} meshes): p50 {p50:.1} p95 {p95:.1} p99 {p99:.1} max {:.1}",
+            lat.len(),
+            lat.last().copied().unwrap_or(f64::NAN)
+        );
+        println!(
+            "resident memory MiB: start {:.1}, after first period {rss_first:.1}, end {rss_last:.1}, max {rss_max:.1}",
+            rss[0].1
+        );
+        if let Some(path) = &args.json {
+            let j = serde_json::json!({
+                "streams": args.streams, "rate_hz": args_rate, "points": args.points,
+                "duration_s": args.duration, "warmup_s": args.warmup,
+                "deadline_ms": cfg.pipeline.deadline_ms,
+                "published": published, "received": received, "processed": frames,
+                "drops": drops, "late": late, "meshes": r.len(),
+                "latency_ms": {"p50": p50, "p95": p95, "p99": p99, "n": lat.len()},
+                "rss_mib": rss.iter().map(|(t, m)| serde_json::json!([t, m])).collect::<Vec<_>>(),
+                "clean_shutdown": summary.clean_shutdown,
+            });
+            std::fs::write(path, serde_json::to_string_pretty(&j)?)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
+        anyhow::Ok(())
+    })
+}
