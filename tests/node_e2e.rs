@@ -32,10 +32,12 @@ use std::time::Duration;
 
 /// Lowest accepted F-score of a decoded mesh of the moving ellipsoid
 /// (one-sided depth-camera views, so recall of the full ground-truth surface
-/// is limited). Measured at the time of writing: mean 0.482, min 0.453 over
-/// the 12 frames. A broken transport/codec path (wrong frame, wrong mesh,
-/// garbled vertices) scores far lower.
-const MIN_F_ELLIPSOID: f64 = 0.4;
+/// is limited). Measured at the time of writing: mean 0.424, min 0.382 over
+/// the 12 frames (0.482 / 0.453 when the unseen back folded onto the visible
+/// shell, which scores a higher precision but encloses no volume). A broken
+/// transport/codec path (wrong frame, wrong mesh, garbled vertices) scores
+/// far lower.
+const MIN_F_ELLIPSOID: f64 = 0.33;
 
 fn ty<M: RosMessage>() -> RosType {
     RosType::new(M::TYPE_NAME, M::TYPE_HASH)

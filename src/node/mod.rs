@@ -105,6 +105,26 @@ pub struct NodeConfig {
 }
 
 impl NodeConfig {
+    /// The rayon pool the frames are computed on (`compute_threads`, 0 = one
+    /// per core), so that compute never runs on the transport's threads.
+    ///
+    /// # Errors
+    /// [`NodeError::Pool`] when the pool cannot be built.
+    pub fn compute_pool(&self) -> Result<std::sync::Arc<rayon::ThreadPool>, NodeError> {
+        let threads = if self.compute_threads == 0 {
+            std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
+        } else {
+            self.compute_threads
+        };
+        Ok(std::sync::Arc::new(
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .thread_name(|i| format!("sepmem-compute-{i}"))
+                .build()
+                .map_err(|e| NodeError::Pool(e.to_string()))?,
+        ))
+    }
+
     /// Check the values that serde cannot.
     ///
     /// # Errors

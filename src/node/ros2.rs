@@ -176,18 +176,7 @@ pub fn run(
     stop: &AtomicBool,
 ) -> Result<u64, NodeError> {
     cfg.validate()?;
-    let threads = if cfg.compute_threads == 0 {
-        std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
-    } else {
-        cfg.compute_threads
-    };
-    let pool = Arc::new(
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .thread_name(|i| format!("sepmem-compute-{i}"))
-            .build()
-            .map_err(|e| NodeError::Pool(e.to_string()))?,
-    );
+    let pool = cfg.compute_pool()?;
     let ctx = r2r::Context::create().map_err(ros_err)?;
     let namespace = if cfg.transport.namespace == "/" {
         ""

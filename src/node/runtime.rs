@@ -145,18 +145,7 @@ where
     S: Future<Output = ()>,
 {
     cfg.validate()?;
-    let threads = if cfg.compute_threads == 0 {
-        std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
-    } else {
-        cfg.compute_threads
-    };
-    let pool = Arc::new(
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .thread_name(|i| format!("sepmem-compute-{i}"))
-            .build()
-            .map_err(|e| NodeError::Pool(e.to_string()))?,
-    );
+    let pool = cfg.compute_pool()?;
     let participant = Arc::new(Participant::open(&cfg.transport).await?);
     tracing::info!(zid = participant.zid(), node = %cfg.transport.node_name, "node started");
     let (new_tx, mut new_rx) = mpsc::channel::<String>(cfg.max_streams.max(16));
