@@ -7,9 +7,7 @@
 //! d_i = (1/k) Σ_{j=1..k} ‖p_i − q_j‖₂                       (paper Eq. 5)
 //! ```
 //!
-//! computed once per cloud, exactly, with a uniform-grid k-NN search
-//! ([`KnnGrid`]: counting-sorted cells, rings searched outward until the k-th
-//! distance is inside the searched block; no per-query allocation). From the `d_i` two spacing
+//! computed once per cloud with a `kiddo` kd-tree. From the `d_i` two spacing
 //! estimates δ are derived:
 //!
 //! * the **global** δ of the whole cloud: the median of the `d_i` by default
@@ -23,8 +21,10 @@
 //! [`crate::separability::point`]).
 
 use crate::cloud::Vec3;
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::num::NonZero;
 use thiserror::Error;
 
 /// Errors while estimating the density of a cloud.
@@ -116,19 +116,22 @@ impl Density {
             });
         }
         let k = k.min(points.len() - 1);
-        let grid = KnnGrid::new(points);
-        let chunk = 1024;
-        let mut per_point = vec![0.0f64; points.len()];
-        per_point
-            .par_chunks_mut(chunk)
-            .enumerate()
-            .for_each(|(c, out)| {
-                let mut best: Vec<f64> = Vec::with_capacity(k + 1);
-                for (o, i) in out.iter_mut().zip(c * chunk..) {
-                    grid.k_nearest(points, i, k, &mut best);
-                    *o = best.iter().map(|d2| d2.max(0.0).sqrt()).sum::<f64>() / k as f64;
-                }
-            });
+        let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+        let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coords);
+        // k + 1 neighbours include the query point itself (or an exact
+        // duplicate of it) at distance 0, which contributes nothing.
+        let qty = NonZero::new(k + 1).unwrap_or(NonZero::<usize>::MIN);
+        let per_point: Vec<f64> = coords
+            .par_iter()
+            .map(|q| {
+                let sum: f64 = tree
+                    .nearest_n::<SquaredEuclidean>(q, qty)
+                    .iter()
+                    .map(|nn| nn.distance.max(0.0).sqrt())
+                    .sum();
+                sum / k as f64
+            })
+            .collect();
         let mean = per_point.iter().sum::<f64>() / per_point.len() as f64;
         let median = median_of(&per_point);
         Ok(Self {
@@ -185,166 +188,6 @@ impl Density {
         I::Item: Into<usize>,
     {
         local_mean(&self.per_point, indices)
-    }
-}
-
-/// Uniform grid over a cloud for exact k-nearest-neighbour queries.
-///
-/// Cells are about one point spacing wide (chosen from the bounding box so
-/// that the grid holds at most ~2 cells per point); points are counting-sorted
-/// by cell. A query visits the rings of cells around its own one, outward,
-/// until it holds `k` candidates whose farthest is nearer than the
-/// unvisited rings.
-#[derive(Debug, Clone)]
-pub struct KnnGrid {
-    lo: Vec3,
-    inv: f64,
-    cell: f64,
-    dims: [usize; 3],
-    /// `starts[c]..starts[c + 1]` indexes `order` for cell `c`.
-    starts: Vec<u32>,
-    order: Vec<u32>,
-    /// The points in cell order (`sorted[s] = points[order[s]]`).
-    sorted: Vec<Vec3>,
-}
-
-/// Cell edge in units of the bounding-box spacing estimate `sqrt(area/n)`.
-const CELL_FACTOR: f64 = 2.0;
-
-impl KnnGrid {
-    /// Build the grid over `points` (all finite, at least one).
-    pub fn new(points: &[Vec3]) -> Self {
-        let mut lo = Vec3::repeat(f64::INFINITY);
-        let mut hi = Vec3::repeat(f64::NEG_INFINITY);
-        for p in points {
-            lo = lo.inf(p);
-            hi = hi.sup(p);
-        }
-        let e = hi - lo;
-        let emax = e.max().max(f64::MIN_POSITIVE);
-        let n = points.len().max(1) as f64;
-        // Surface-like clouds: about as many cells as points on the bounding
-        // box's area scale; never more than ~2 cells per point.
-        let floor = 1e-3 * emax;
-        let (ex, ey, ez) = (e.x.max(floor), e.y.max(floor), e.z.max(floor));
-        let area = 2.0 * (ex * ey + ey * ez + ez * ex);
-        let mut cell = (CELL_FACTOR * (area / n).sqrt()).max(emax * 1e-6);
-        let count = |c: f64| -> [usize; 3] {
-            [
-                ((e.x / c) as usize + 1).min(1 << 20),
-                ((e.y / c) as usize + 1).min(1 << 20),
-                ((e.z / c) as usize + 1).min(1 << 20),
-            ]
-        };
-        let mut dims = count(cell);
-        while (dims[0] * dims[1]) as f64 * dims[2] as f64 > 2.0 * n + 64.0 {
-            cell *= 1.26;
-            dims = count(cell);
-        }
-        let inv = 1.0 / cell;
-        let ncell = dims[0] * dims[1] * dims[2];
-        let mut starts = vec![0u32; ncell + 1];
-        let idx_of = |p: &Vec3| -> usize {
-            let c = |v: f64, d: usize| ((v * inv) as usize).min(d - 1);
-            let q = p - lo;
-            (c(q.z, dims[2]) * dims[1] + c(q.y, dims[1])) * dims[0] + c(q.x, dims[0])
-        };
-        let cells: Vec<u32> = points.iter().map(|p| idx_of(p) as u32).collect();
-        for &c in &cells {
-            starts[c as usize + 1] += 1;
-        }
-        for c in 0..ncell {
-            starts[c + 1] += starts[c];
-        }
-        let mut fill = starts.clone();
-        let mut order = vec![0u32; points.len()];
-        for (i, &c) in cells.iter().enumerate() {
-            let f = &mut fill[c as usize];
-            order[*f as usize] = i as u32;
-            *f += 1;
-        }
-        let sorted = order.iter().map(|&i| points[i as usize]).collect();
-        Self {
-            lo,
-            inv,
-            cell,
-            dims,
-            starts,
-            order,
-            sorted,
-        }
-    }
-
-    /// The squared distances from point `i` to its `k` nearest other points
-    /// (ascending) in `best` (fewer if the cloud is smaller).
-    pub fn k_nearest(&self, points: &[Vec3], i: usize, k: usize, best: &mut Vec<f64>) {
-        best.clear();
-        let q = points[i];
-        let r = q - self.lo;
-        let ci = [
-            ((r.x * self.inv) as usize).min(self.dims[0] - 1) as i64,
-            ((r.y * self.inv) as usize).min(self.dims[1] - 1) as i64,
-            ((r.z * self.inv) as usize).min(self.dims[2] - 1) as i64,
-        ];
-        let maxring = self.dims.iter().copied().max().unwrap_or(1) as i64;
-        let dims = [
-            self.dims[0] as i64,
-            self.dims[1] as i64,
-            self.dims[2] as i64,
-        ];
-        // Distance from q to the nearest face of its own cell.
-        let mut slack = f64::INFINITY;
-        for a in 0..3 {
-            let f = r[a] - ci[a] as f64 * self.cell;
-            slack = slack.min(f.max(0.0)).min((self.cell - f).max(0.0));
-        }
-        let mut ring = 0i64;
-        loop {
-            // Visit the shell of cells at Chebyshev distance `ring`.
-            for dz in -ring..=ring {
-                let z = ci[2] + dz;
-                if z < 0 || z >= dims[2] {
-                    continue;
-                }
-                for dy in -ring..=ring {
-                    let y = ci[1] + dy;
-                    if y < 0 || y >= dims[1] {
-                        continue;
-                    }
-                    let on_face = dz.abs() == ring || dy.abs() == ring;
-                    let step = if on_face { 1 } else { (2 * ring).max(1) };
-                    let mut dx = -ring;
-                    while dx <= ring {
-                        let x = ci[0] + dx;
-                        if x >= 0 && x < dims[0] {
-                            let c = ((z * dims[1] + y) * dims[0] + x) as usize;
-                            let (a, b) = (self.starts[c] as usize, self.starts[c + 1] as usize);
-                            for (&j, p) in self.order[a..b].iter().zip(&self.sorted[a..b]) {
-                                if j as usize == i {
-                                    continue;
-                                }
-                                let d2 = (p - q).norm_squared();
-                                if best.len() == k {
-                                    if d2 >= best[k - 1] {
-                                        continue;
-                                    }
-                                    best.pop();
-                                }
-                                let pos = best.partition_point(|&b| b <= d2);
-                                best.insert(pos, d2);
-                            }
-                        }
-                        dx += step;
-                    }
-                }
-            }
-            // Every point outside the visited block is farther than ring·cell.
-            let reach = ring as f64 * self.cell + slack;
-            if (best.len() == k && best[k - 1] <= reach * reach) || ring > maxring {
-                return;
-            }
-            ring += 1;
-        }
     }
 }
 
