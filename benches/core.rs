@@ -50,31 +50,36 @@ fn bench_search(c: &mut Criterion) {
         .sum::<usize>() as f64
         / cuboids.len() as f64;
     eprintln!("search bench: delta = {delta:.5}, mean gathered = {mean_gathered:.1}, K = 30");
-    let mut i = 0;
-    c.bench_function("oriented_search_20k_K30", |b| {
-        b.iter(|| {
-            i = (i + 1) % cuboids.len();
-            black_box(
-                searcher
-                    .search(black_box(&cuboids[i]), &mut scratch)
-                    .unwrap(),
-            )
-        })
-    });
+    bench_cuboids(
+        c,
+        "oriented_search_20k_K30",
+        &searcher,
+        &cuboids,
+        &mut scratch,
+    );
     for cell in [0.02, 0.06] {
         let index = SpatialIndex::with_cell_size(&pts, cell).unwrap();
         let searcher = Searcher::new(&index, Delta::Global(delta), 30).unwrap();
-        c.bench_function(&format!("oriented_search_20k_K30_cell{cell}"), |b| {
-            b.iter(|| {
-                i = (i + 1) % cuboids.len();
-                black_box(
-                    searcher
-                        .search(black_box(&cuboids[i]), &mut scratch)
-                        .unwrap(),
-                )
-            })
-        });
+        let name = format!("oriented_search_20k_K30_cell{cell}");
+        bench_cuboids(c, &name, &searcher, &cuboids, &mut scratch);
     }
+}
+
+/// Time one search per iteration, cycling through `cuboids`.
+fn bench_cuboids(
+    c: &mut Criterion,
+    name: &str,
+    searcher: &Searcher<'_>,
+    cuboids: &[Cuboid],
+    scratch: &mut SearchScratch,
+) {
+    let mut i = 0;
+    c.bench_function(name, |b| {
+        b.iter(|| {
+            i = (i + 1) % cuboids.len();
+            black_box(searcher.search(black_box(&cuboids[i]), scratch).unwrap())
+        })
+    });
 }
 
 fn bench_density(c: &mut Criterion) {

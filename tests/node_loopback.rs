@@ -161,6 +161,25 @@ async fn wait_for<F: Fn() -> bool>(f: F, what: &str) {
     panic!("timed out waiting for {what}");
 }
 
+/// Run a node on a tokio task until the returned sender fires.
+fn spawn_node(
+    cfg: NodeConfig,
+    backend: Arc<TestBackend>,
+) -> (
+    tokio::sync::oneshot::Sender<()>,
+    tokio::task::JoinHandle<NodeSummary>,
+) {
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let node = tokio::spawn(async move {
+        run(&cfg, backend, async {
+            let _ = stop_rx.await;
+        })
+        .await
+        .unwrap()
+    });
+    (stop_tx, node)
+}
+
 fn any_type(name: &str) -> RosType {
     RosType::new(name, "x")
 }
@@ -170,14 +189,7 @@ async fn overload_keeps_newest_counts_drops_and_isolates_a_malformed_stream() {
     let (h, cfg) = harness("ovl").await;
     let seen: Arc<Mutex<Vec<(String, u64)>>> = Arc::default();
     let backend = Arc::new(TestBackend { seen: seen.clone() });
-    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-    let node = tokio::spawn(async move {
-        run(&cfg, backend, async {
-            let _ = stop_rx.await;
-        })
-        .await
-        .unwrap()
-    });
+    let (stop_tx, node) = spawn_node(cfg, backend);
     let (_msub, meshes) = collect(&h, "/ovl/**", &any_type("sepmem_msgs/msg/SurfaceMesh")).await;
     let (_dsub, diags) = collect(
         &h,
@@ -304,15 +316,9 @@ async fn two_shards_split_streams_without_overlap_or_gap() {
         c.shard = Shard { index, count: 2 };
         c.transport.node_name = format!("shd{index}");
         let backend = Arc::new(TestBackend { seen: seen.clone() });
-        let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+        let (tx, node) = spawn_node(c, backend);
         stops.push(tx);
-        nodes.push(tokio::spawn(async move {
-            run(&c, backend, async {
-                let _ = rx.await;
-            })
-            .await
-            .unwrap()
-        }));
+        nodes.push(node);
     }
     let (_msub, meshes) = collect(&h, "/shd/**", &any_type("sepmem_msgs/msg/SurfaceMesh")).await;
     let topics: Vec<String> = (0..8).map(|i| format!("/shd/obj{i}")).collect();
@@ -366,14 +372,7 @@ async fn tokens_are_declared_and_withdrawn_on_clean_shutdown() {
     let (h, cfg) = harness("tok").await;
     let seen: Arc<Mutex<Vec<(String, u64)>>> = Arc::default();
     let backend = Arc::new(TestBackend { seen: seen.clone() });
-    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-    let node = tokio::spawn(async move {
-        run(&cfg, backend, async {
-            let _ = stop_rx.await;
-        })
-        .await
-        .unwrap()
-    });
+    let (stop_tx, node) = spawn_node(cfg, backend);
     let (_msub, markers) = collect(
         &h,
         "/tok/**",
