@@ -19,7 +19,7 @@ use crate::cloud::{Aabb, CloudError, PointCloud, Vec3};
 use crate::density::Density;
 use crate::separability::attribute::{AttributeSet, AttributeWeights, ChannelWeight};
 use crate::separability::grid::SpatialIndex;
-use crate::separability::search::{Cuboid, Delta, SearchScratch, Searcher};
+use crate::separability::search::{BestRule, Cuboid, Delta, SearchScratch, Searcher};
 use crate::spline::{regrid, ClosedSurface, FitSystem, Layout};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -202,6 +202,9 @@ struct SampleOut {
     eta: f64,
     /// 0 = no move, 1 = boundary found, 2 = inward force.
     state: u8,
+    /// The sample point and its unit normal, for the move `p + β·shift·n`.
+    p: Vec3,
+    n: Vec3,
 }
 
 /// Per-thread buffers: the search's own plus the centring band.
@@ -240,6 +243,11 @@ impl Stepper<'_> {
         let cfg = self.cfg;
         let sp = surface.eval_at(layout, i, j);
         let n = surface.normal(&sp);
+        let still = SampleOut {
+            p: sp.p,
+            n,
+            ..SampleOut::default()
+        };
         let cmin = cfg.cross_min_delta * self.delta;
         let cmax = self.cross_max.max(cmin);
         let w = (sp.su.norm() / layout.u_n() as f64 * cfg.cross_scale).clamp(cmin, cmax);
@@ -248,9 +256,14 @@ impl Stepper<'_> {
         if sp.su.norm_squared() > 0.0 {
             cub = cub.with_tangent(sp.su);
         }
-        let out = match self.searcher.search(&cub, scratch) {
+        let rule = if cfg.inside_denser {
+            BestRule::InnerDenser
+        } else {
+            BestRule::Any
+        };
+        let out = match self.searcher.search_best(&cub, rule, scratch) {
             Ok(o) => o,
-            Err(_) => return SampleOut::default(),
+            Err(_) => return still,
         };
         let d = if out.delta > 0.0 {
             out.delta
@@ -258,17 +271,8 @@ impl Stepper<'_> {
             self.delta
         };
         let expected = w * h / (d * d);
-        let mut best: Option<(f64, f64)> = None;
-        for st in scratch.profile() {
-            if st.eta <= best.map_or(0.0, |b| b.1) {
-                continue;
-            }
-            if cfg.inside_denser && st.mu1 < st.mu2 {
-                continue;
-            }
-            best = Some((st.offset, st.eta));
-        }
-        if let Some((t, eta)) = best {
+        if let Some(best) = out.best {
+            let (t, eta) = (best.offset, best.eta);
             let lo = t - cfg.band_inner_delta * d;
             let hi = t + cfg.band_outer_delta * d;
             // Robust centring on the layer: median normal offset of the
@@ -296,6 +300,7 @@ impl Stepper<'_> {
                     shift: m,
                     eta,
                     state: 1,
+                    ..still
                 };
             }
         }
@@ -310,9 +315,10 @@ impl Stepper<'_> {
                 shift: -cfg.inward_step * depth,
                 eta: 0.0,
                 state: 2,
+                ..still
             };
         }
-        SampleOut::default()
+        still
     }
 
     /// Search every sample of `layout` (in parallel, coarse row chunks).
@@ -695,13 +701,11 @@ pub(crate) fn run(
             shifts.extend(outs.iter().map(|o| o.shift));
         }
         targets.clear();
-        for j in 0..layout.v_n() {
-            for i in 0..layout.u_n() {
-                let sp = surface.eval_at(&layout, i, j);
-                let n = surface.normal(&sp);
-                targets.push(sp.p + n * (cfg.beta * shifts[j * layout.u_n() + i]));
-            }
-        }
+        targets.extend(
+            outs.iter()
+                .zip(&shifts)
+                .map(|(o, &s)| o.p + o.n * (cfg.beta * s)),
+        );
         times.search_ms += ms(t_search);
         let t_fit = Instant::now();
         // The orientation sign is fixed once (init, warm start, regrid):

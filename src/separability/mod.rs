@@ -20,9 +20,12 @@ pub use attribute::{
 };
 pub use filter::{separability_map, FilterDirection, FilterError, FilterSize};
 pub use grid::{GridError, OrientedBox, SpatialIndex};
-pub use point::{eta_from_counts, non_data_count, point_separability, PointSeparability};
+pub use point::{
+    capacity, eta_from_counts, eta_phi2, non_data_count, point_separability, PointSeparability,
+};
 pub use search::{
-    Best, BoundaryStats, Cuboid, Delta, SearchError, SearchOutcome, SearchScratch, Searcher,
+    Best, BestRule, BoundaryStats, Cuboid, Delta, SearchError, SearchOutcome, SearchScratch,
+    Searcher,
 };
 
 use serde::{Deserialize, Serialize};

@@ -15,7 +15,16 @@
 //!    width `Δ = M_d/(K + 1)`; boundary `k` lies at `t_k = −M_d/2 + (k+1)Δ`,
 //!    so `r1 = [−M_d/2, t_k)` holds slabs `0..=k`;
 //! 3. prefix sums of the slab counts give `o1`, `o2` for every boundary in
-//!    O(1); `b1`, `b2` follow from Eq. 4 with `Vol(r1) = M_w M_h (k+1) Δ`.
+//!    O(1); `b1`, `b2` follow from Eq. 4 with `Vol(r1) = M_w M_h (k+1) Δ`,
+//!    from a per-call table of the capacities `⌊M_w M_h j Δ / δ³⌋` of the
+//!    `K` region sizes (`r1` of boundary `k` and `r2` of boundary `K−1−k`
+//!    share a size).
+//!
+//! [`Searcher::search`] records the full profile. [`Searcher::search_best`]
+//! returns only the best boundary under a [`BestRule`] (the membrane's
+//! inside-denser rule); it screens the boundaries with the one-division
+//! closed form of η_p and evaluates Eq. 7 only near the maximum, with the
+//! same result as scanning the full profile.
 //!
 //! δ is either a fixed global value or the local δ_R of the merged region
 //! `R = r1 ∪ r2` (the whole cuboid, so one value per call): the mean of the
@@ -31,7 +40,7 @@ use crate::cloud::Vec3;
 use crate::density::local_mean;
 use crate::separability::attribute::{fisher_ratio, AttributeSet};
 use crate::separability::grid::{OrientedBox, SpatialIndex};
-use crate::separability::point::{eta_from_counts, non_data_count};
+use crate::separability::point::{capacity, eta_from_counts, eta_phi2};
 use thiserror::Error;
 
 /// Errors of the oriented search.
@@ -209,6 +218,18 @@ pub struct BoundaryStats {
     pub eta: f64,
 }
 
+/// Which boundaries may be reported as the best one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum BestRule {
+    /// Every boundary: the plain argmax of η.
+    #[default]
+    Any,
+    /// Only boundaries whose inner side is at least as dense as the outer
+    /// one (`μ1 ≥ μ2`): the membrane's inside-denser rule, which keeps the
+    /// search from locking onto the outer face of a neighbouring layer.
+    InnerDenser,
+}
+
 /// The argmax of a profile.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Best {
@@ -251,6 +272,11 @@ pub struct SearchScratch {
     attr_eta: Vec<f64>,
     channels: usize,
     slab_width: f64,
+    half_depth: f64,
+    /// Eq. 4 capacity of a region of `j` slabs, `j` in `0..=K`.
+    capacity: Vec<f64>,
+    /// Screening key per boundary of [`Searcher::search_best`].
+    screen: Vec<f64>,
 }
 
 impl SearchScratch {
@@ -399,6 +425,7 @@ impl<'a> Searcher<'a> {
     }
 
     /// Evaluate the separability profile of `cuboid`; details go to `scratch`.
+    /// The reported best is the plain argmax of η ([`BestRule::Any`]).
     ///
     /// # Errors
     /// [`SearchError::BadFrame`] / [`SearchError::BadExtent`] for an invalid cuboid.
@@ -407,12 +434,68 @@ impl<'a> Searcher<'a> {
         cuboid: &Cuboid,
         scratch: &mut SearchScratch,
     ) -> Result<SearchOutcome, SearchError> {
+        let (gathered, delta) = self.gather(cuboid, scratch)?;
+        let best = self.profile_pass(scratch, BestRule::Any);
+        Ok(SearchOutcome {
+            gathered,
+            delta,
+            best,
+        })
+    }
+
+    /// The best boundary of `cuboid` under `rule`, without the full profile.
+    ///
+    /// The outcome (gathered count, δ, best boundary with its offset and η)
+    /// is the same as [`Self::search`] followed by a scan of the profile for
+    /// the first largest positive η among the boundaries `rule` admits. The
+    /// gathered offsets, indices and slab counts are in `scratch` as after
+    /// [`Self::search`]; [`SearchScratch::profile`] is left empty unless
+    /// attributes are enabled (the weighted η needs every boundary's sums, so
+    /// the full profile is computed then).
+    ///
+    /// Without attributes η_p is evaluated only where it can be the maximum:
+    /// each admitted boundary is screened with the one-division closed form
+    /// [`eta_phi2`], and [`eta_from_counts`] (the value reported, identical
+    /// to the profile's) runs only for boundaries within a rounding
+    /// tolerance of the screened maximum.
+    ///
+    /// # Errors
+    /// [`SearchError::BadFrame`] / [`SearchError::BadExtent`] for an invalid cuboid.
+    pub fn search_best(
+        &self,
+        cuboid: &Cuboid,
+        rule: BestRule,
+        scratch: &mut SearchScratch,
+    ) -> Result<SearchOutcome, SearchError> {
+        let (gathered, delta) = self.gather(cuboid, scratch)?;
+        let best = if self.attributes.is_some() {
+            self.profile_pass(scratch, rule)
+        } else {
+            scratch.profile.clear();
+            Self::screened_best(scratch, rule)
+        };
+        Ok(SearchOutcome {
+            gathered,
+            delta,
+            best,
+        })
+    }
+
+    /// Gather the cuboid's points into `scratch` (offsets, indices, slab
+    /// counts, and the slab of each point when attributes need it), fix δ
+    /// and fill the capacity table. Returns (gathered, δ).
+    fn gather(
+        &self,
+        cuboid: &Cuboid,
+        scratch: &mut SearchScratch,
+    ) -> Result<(usize, f64), SearchError> {
         let obb = cuboid.oriented_box()?;
         let k_count = self.boundaries;
         let slabs = k_count + 1;
         let half_depth = obb.half[0];
         let slab_width = cuboid.depth / slabs as f64;
         let inv_slab = 1.0 / slab_width;
+        let keep_slab = self.attributes.is_some();
 
         scratch.offsets.clear();
         scratch.indices.clear();
@@ -420,6 +503,7 @@ impl<'a> Searcher<'a> {
         scratch.slab_counts.clear();
         scratch.slab_counts.resize(slabs, 0);
         scratch.slab_width = slab_width;
+        scratch.half_depth = half_depth;
         {
             let (offsets, indices, counts, slab_of) = (
                 &mut scratch.offsets,
@@ -433,9 +517,53 @@ impl<'a> Searcher<'a> {
                 counts[slab] += 1;
                 offsets.push(t);
                 indices.push(i);
-                slab_of.push(slab as u32);
+                if keep_slab {
+                    slab_of.push(slab as u32);
+                }
             });
         }
+        let gathered = scratch.offsets.len();
+        let delta = match self.delta {
+            Delta::Global(d) => d,
+            Delta::Local(per_point) => {
+                local_mean(per_point, scratch.indices.iter().map(|&i| i as usize)).unwrap_or(0.0)
+            }
+        };
+        // Eq. 4 capacities of the K possible region volumes: r1 of boundary
+        // k spans k + 1 slabs and r2 spans K − k, so `capacity[j]` (j slabs)
+        // serves both sides. The volume expression is the one of the
+        // profile's definition, so the counts are bit-identical to
+        // `non_data_count(area·Δ·j, δ, o)`.
+        let area = cuboid.width * cuboid.height;
+        scratch.capacity.clear();
+        scratch
+            .capacity
+            .extend((0..slabs).map(|j| capacity(area * slab_width * j as f64, delta)));
+        Ok((gathered, delta))
+    }
+
+    /// `(o1, b1, o2, b2)` of boundary `k` given its `o1` (Eq. 4 with the
+    /// capacity table of [`Self::gather`]).
+    #[inline]
+    fn counts(scratch: &SearchScratch, k: usize, o1: u32, total: u32) -> [f64; 4] {
+        let k_count = scratch.capacity.len() - 1;
+        let (fo1, fo2) = (f64::from(o1), f64::from(total - o1));
+        let b1 = (scratch.capacity[k + 1] - fo1).max(0.0);
+        let b2 = (scratch.capacity[k_count - k] - fo2).max(0.0);
+        [fo1, b1, fo2, b2]
+    }
+
+    /// Offset `t_k` of boundary `k`.
+    #[inline]
+    fn offset(scratch: &SearchScratch, k: usize) -> f64 {
+        -scratch.half_depth + scratch.slab_width * (k + 1) as f64
+    }
+
+    /// The full profile of the gathered points into `scratch.profile` (and
+    /// the attribute η per boundary); returns the best boundary under `rule`.
+    fn profile_pass(&self, scratch: &mut SearchScratch, rule: BestRule) -> Option<Best> {
+        let k_count = self.boundaries;
+        let slabs = k_count + 1;
         // Attribute running sums per slab (Eq. 1 from (count, Σa, Σa²)).
         let channels = self.attributes.map_or(&[][..], |a| a.channels());
         let nch = channels.len();
@@ -461,27 +589,14 @@ impl<'a> Searcher<'a> {
         }
         let point_weight = self.attributes.map_or(1.0, |a| a.point_weight());
         let total_weight = self.attributes.map_or(1.0, |a| a.total_weight());
-        let gathered = scratch.offsets.len();
-        let delta = match self.delta {
-            Delta::Global(d) => d,
-            Delta::Local(per_point) => {
-                local_mean(per_point, scratch.indices.iter().map(|&i| i as usize)).unwrap_or(0.0)
-            }
-        };
 
-        let area = cuboid.width * cuboid.height;
         scratch.profile.clear();
         let mut best: Option<Best> = None;
         let mut o1 = 0u32;
-        let total = gathered as u32;
+        let total = scratch.offsets.len() as u32;
         for k in 0..k_count {
             o1 += scratch.slab_counts[k];
-            let o2 = total - o1;
-            let vol1 = area * slab_width * (k + 1) as f64;
-            let vol2 = area * slab_width * (k_count - k) as f64;
-            let (fo1, fo2) = (f64::from(o1), f64::from(o2));
-            let b1 = non_data_count(vol1, delta, fo1);
-            let b2 = non_data_count(vol2, delta, fo2);
+            let [fo1, b1, fo2, b2] = Self::counts(scratch, k, o1, total);
             let (n1, n2) = (fo1 + b1, fo2 + b2);
             let eta_point = eta_from_counts(fo1, b1, fo2, b2);
             let mut eta = eta_point;
@@ -504,11 +619,11 @@ impl<'a> Searcher<'a> {
                     0.0
                 };
             }
-            let offset = -half_depth + slab_width * (k + 1) as f64;
+            let offset = Self::offset(scratch, k);
             let stats = BoundaryStats {
                 offset,
                 o1,
-                o2,
+                o2: total - o1,
                 b1,
                 b2,
                 mu1: if n1 > 0.0 { fo1 / n1 } else { 0.0 },
@@ -516,7 +631,11 @@ impl<'a> Searcher<'a> {
                 eta_point,
                 eta,
             };
-            if stats.eta > 0.0 && best.is_none_or(|b| stats.eta > b.eta) {
+            let admitted = match rule {
+                BestRule::Any => true,
+                BestRule::InnerDenser => stats.mu1 >= stats.mu2,
+            };
+            if admitted && stats.eta > 0.0 && best.is_none_or(|b| stats.eta > b.eta) {
                 best = Some(Best {
                     boundary: k,
                     offset,
@@ -525,11 +644,76 @@ impl<'a> Searcher<'a> {
             }
             scratch.profile.push(stats);
         }
-        Ok(SearchOutcome {
-            gathered,
-            delta,
-            best,
-        })
+        best
+    }
+
+    /// The best boundary under `rule` by η_p alone, evaluating
+    /// [`eta_from_counts`] only near the maximum (see [`Self::search_best`]).
+    ///
+    /// Exactness: with every count and capacity below 2²⁶ all products of
+    /// two counts are exact, so (a) `μ1 < μ2` is decided exactly by
+    /// `o1·n2 < o2·n1`, which agrees with comparing the rounded quotients
+    /// (distinct fractions with `n1·n2 < 2⁵²` differ by more than their
+    /// rounding), and (b) [`eta_phi2`] is within 8 ulps of the exact η_p while
+    /// [`eta_from_counts`] is within `12u·N/min(O, B) + 6u ≤ 12u·N + 6u` of it
+    /// (the cancellation in `μ_r − μ_T`; `N` counts, `O`, `B` actual and
+    /// non-data totals, `u = 2⁻⁵³`). A boundary screened more than
+    /// `tol = 10⁻¹⁴·(N_max + 2)` below the screened maximum therefore has a
+    /// smaller η than the maximiser and cannot be the first argmax. Beyond
+    /// 2²⁶ every admitted boundary is evaluated.
+    fn screened_best(scratch: &mut SearchScratch, rule: BestRule) -> Option<Best> {
+        const EXACT: f64 = 67_108_864.0; // 2²⁶
+        let k_count = scratch.capacity.len() - 1;
+        let total = scratch.offsets.len() as u32;
+        let cap_max = scratch.capacity.iter().copied().fold(0.0, f64::max);
+        let n_max = 2.0 * cap_max + f64::from(total);
+        let exact = n_max < EXACT;
+        scratch.screen.clear();
+        let mut top = f64::NEG_INFINITY;
+        let mut o1 = 0u32;
+        for k in 0..k_count {
+            o1 += scratch.slab_counts[k];
+            let [fo1, b1, fo2, b2] = Self::counts(scratch, k, o1, total);
+            let (n1, n2) = (fo1 + b1, fo2 + b2);
+            // η_p is 0 with an empty side: never the best.
+            let admitted = n1 > 0.0
+                && n2 > 0.0
+                && match rule {
+                    BestRule::Any => true,
+                    // μ1 ≥ μ2, i.e. not (o1/n1 < o2/n2).
+                    BestRule::InnerDenser if exact => fo1 * n2 >= fo2 * n1,
+                    BestRule::InnerDenser => fo1 / n1 >= fo2 / n2,
+                };
+            let key = match (admitted, exact) {
+                (false, _) => f64::NEG_INFINITY,
+                (true, true) => eta_phi2(fo1, b1, fo2, b2),
+                (true, false) => 1.0,
+            };
+            top = top.max(key);
+            scratch.screen.push(key);
+        }
+        if top == f64::NEG_INFINITY {
+            return None;
+        }
+        let floor = top - 1e-14 * (n_max + 2.0);
+        let mut best: Option<Best> = None;
+        let mut o1 = 0u32;
+        for k in 0..k_count {
+            o1 += scratch.slab_counts[k];
+            if scratch.screen[k] < floor {
+                continue;
+            }
+            let [fo1, b1, fo2, b2] = Self::counts(scratch, k, o1, total);
+            let eta = eta_from_counts(fo1, b1, fo2, b2);
+            if eta > 0.0 && best.is_none_or(|b| eta > b.eta) {
+                best = Some(Best {
+                    boundary: k,
+                    offset: Self::offset(scratch, k),
+                    eta,
+                });
+            }
+        }
+        best
     }
 }
 
