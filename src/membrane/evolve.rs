@@ -220,7 +220,6 @@ struct Stepper<'a> {
     cfg: &'a MembraneConfig,
     searcher: Searcher<'a>,
     delta: f64,
-    points: &'a [Vec3],
     outside: Option<&'a OutsideGrid>,
     cross_max: f64,
     /// Centroid of the points: the inward force never moves a sample away from it.
@@ -279,23 +278,40 @@ impl Stepper<'_> {
             // band's points nearest to the sample's axis (the nearer half,
             // at least 3), which limits the curvature bias of wide boxes.
             ts.band.clear();
-            for (&off, &idx) in scratch.offsets().iter().zip(scratch.indices()) {
+            for (&off, &r2) in scratch.offsets().iter().zip(scratch.sq_distances()) {
                 if off >= lo && off <= hi {
-                    let d = self.points[idx as usize] - sp.p;
-                    ts.band.push(((d.norm_squared() - off * off).max(0.0), off));
+                    ts.band.push(((r2 - off * off).max(0.0), off));
                 }
             }
             let count = ts.band.len();
             if count > 0 && count as f64 >= cfg.significance * expected {
                 let keep = count.div_ceil(KEEP_DIV).max(3).min(count);
                 if keep < count {
-                    ts.band
-                        .select_nth_unstable_by(keep - 1, |a, b| a.0.total_cmp(&b.0));
+                    if count <= SMALL {
+                        // What `select_nth_unstable_by` does at this length
+                        // (a stable insertion sort, as 0 < keep − 1 < count − 1),
+                        // with the comparison inlined: the same `keep` nearest
+                        // points, ties included.
+                        insertion_sort_by(&mut ts.band, |e| e.0);
+                    } else {
+                        ts.band
+                            .select_nth_unstable_by(keep - 1, |a, b| a.0.total_cmp(&b.0));
+                    }
                 }
                 let near = &mut ts.band[..keep];
                 let mid = keep / 2;
-                near.select_nth_unstable_by(mid, |a, b| a.1.total_cmp(&b.1));
-                let m = near[mid].1;
+                // The mid-th smallest offset (a value: any exact selection gives it).
+                let m = if keep <= SMALL {
+                    let mut buf = [0.0f64; SMALL];
+                    for (b, e) in buf.iter_mut().zip(near.iter()) {
+                        *b = e.1;
+                    }
+                    insertion_sort_by(&mut buf[..keep], |&x| x);
+                    buf[mid]
+                } else {
+                    near.select_nth_unstable_by(mid, |a, b| a.1.total_cmp(&b.1));
+                    near[mid].1
+                };
                 return SampleOut {
                     shift: m,
                     eta,
@@ -349,6 +365,27 @@ impl Stepper<'_> {
     }
 }
 
+/// Slices up to this length are ordered by [`insertion_sort_by`].
+const SMALL: usize = 16;
+
+/// Stable sort of a short slice by `key` under `f64::total_cmp` (inlined;
+/// the generic sort and selection routines call their comparator out of
+/// line, which dominates on the handful of values of a sample's band or
+/// 3×3 neighbourhood).
+#[inline]
+fn insertion_sort_by<T: Copy>(v: &mut [T], key: impl Fn(&T) -> f64) {
+    for i in 1..v.len() {
+        let x = v[i];
+        let kx = key(&x);
+        let mut j = i;
+        while j > 0 && kx.total_cmp(&key(&v[j - 1])).is_lt() {
+            v[j] = v[j - 1];
+            j -= 1;
+        }
+        v[j] = x;
+    }
+}
+
 /// Median of the shifts of moving samples in each 3×3 neighbourhood
 /// (periodic in u, clamped in v); samples that do not move stay put.
 fn median_filter(outs: &[SampleOut], un: usize, vn: usize, shifts: &mut Vec<f64>) {
@@ -362,14 +399,13 @@ fn median_filter(outs: &[SampleOut], un: usize, vn: usize, shifts: &mut Vec<f64>
                 continue;
             }
             let mut n = 0;
-            for dj in [-1i64, 0, 1] {
-                let jj = j as i64 + dj;
-                if jj < 0 || jj >= vn as i64 {
-                    continue;
-                }
-                for di in [un - 1, 0, 1] {
-                    let ii = (i + di) % un;
-                    let o = outs[jj as usize * un + ii];
+            // Periodic in u (no modulo: this runs for every sample).
+            let left = if i == 0 { un - 1 } else { i - 1 };
+            let right = if i + 1 == un { 0 } else { i + 1 };
+            for jj in j.saturating_sub(1)..(j + 2).min(vn) {
+                let row = &outs[jj * un..(jj + 1) * un];
+                for ii in [left, i, right] {
+                    let o = &row[ii];
                     if o.state != 0 {
                         buf[n] = o.shift;
                         n += 1;
@@ -377,7 +413,7 @@ fn median_filter(outs: &[SampleOut], un: usize, vn: usize, shifts: &mut Vec<f64>
                 }
             }
             let s = &mut buf[..n];
-            s.sort_unstable_by(f64::total_cmp);
+            insertion_sort_by(s, |&x| x);
             shifts[k] = if n % 2 == 1 {
                 s[n / 2]
             } else {
@@ -595,7 +631,6 @@ pub(crate) fn run(
         cfg,
         searcher,
         delta,
-        points: &points,
         outside: outside.as_ref(),
         cross_max: cfg.cross_max * scale,
         center: points.iter().sum::<Vec3>() / points.len() as f64,

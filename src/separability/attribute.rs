@@ -324,7 +324,7 @@ pub fn neighbour_counts(points: &[Vec3], radius: f64) -> Result<Vec<u32>, Attrib
                 half: [radius; 3],
             };
             let mut count = 0u32;
-            index.for_each_in_box(&b, |_, s| {
+            index.for_each_in_box(&b, |_, s, _| {
                 if s[0] * s[0] + s[1] * s[1] + s[2] * s[2] <= r2 {
                     count += 1;
                 }

@@ -213,12 +213,12 @@ impl SpatialIndex {
         self.dims
     }
 
-    /// Call `f(index, [s0, s1, s2])` for every indexed point inside the
+    /// Call `f(index, [s0, s1, s2], r2)` for every indexed point inside the
     /// (closed) oriented box, where `index` is the point's index in the
-    /// original slice and `s_j = (p − centre)·axes[j]` its box coordinates.
-    /// Order is unspecified. Allocation-free.
+    /// original slice, `s_j = (p − centre)·axes[j]` its box coordinates and
+    /// `r2 = |p − centre|²`. Order is unspecified. Allocation-free.
     #[inline]
-    pub fn for_each_in_box(&self, b: &OrientedBox, mut f: impl FnMut(u32, [f64; 3])) {
+    pub fn for_each_in_box(&self, b: &OrientedBox, mut f: impl FnMut(u32, [f64; 3], f64)) {
         if self.sorted.is_empty() {
             return;
         }
@@ -269,18 +269,14 @@ impl SpatialIndex {
                         let p = self.sorted[k];
                         let d = Vec3::new(p[0] - b.center.x, p[1] - b.center.y, p[2] - b.center.z);
                         let t = d.dot(&n);
-                        if t.abs() > hd {
-                            continue;
-                        }
                         let u = d.dot(&a1);
-                        if u.abs() > hw {
-                            continue;
-                        }
                         let v = d.dot(&a2);
-                        if v.abs() > hh {
+                        // One branch (non-short-circuit `|`): the three
+                        // tests pass or fail unpredictably point to point.
+                        if (t.abs() > hd) | (u.abs() > hw) | (v.abs() > hh) {
                             continue;
                         }
-                        f(self.sorted_index[k], [t, u, v]);
+                        f(self.sorted_index[k], [t, u, v], d.norm_squared());
                     }
                 }
             }
@@ -346,8 +342,9 @@ mod tests {
                     ],
                 };
                 let mut got = Vec::new();
-                idx.for_each_in_box(&b, |i, s| {
+                idx.for_each_in_box(&b, |i, s, r2| {
                     let d = pts[i as usize] - c;
+                    assert_eq!(r2, d.norm_squared());
                     for (sj, axis) in s.iter().zip(&b.axes) {
                         assert!((sj - d.dot(axis)).abs() < 1e-12);
                     }
@@ -375,12 +372,12 @@ mod tests {
             axes: [Vec3::x(), Vec3::y(), Vec3::z()],
             half: [1.0; 3],
         };
-        idx.for_each_in_box(&b, |_, _| panic!("no points"));
+        idx.for_each_in_box(&b, |_, _, _| panic!("no points"));
         // All points identical: one cell.
         let pts = vec![Vec3::new(0.1, 0.2, 0.3); 10];
         let idx = SpatialIndex::new(&pts).unwrap();
         let mut n = 0;
-        idx.for_each_in_box(&b, |_, _| n += 1);
+        idx.for_each_in_box(&b, |_, _, _| n += 1);
         assert_eq!(n, 10);
         assert!(matches!(
             SpatialIndex::with_cell_size(&pts, 0.0),

@@ -21,7 +21,8 @@ pub use attribute::{
 pub use filter::{separability_map, FilterDirection, FilterError, FilterSize};
 pub use grid::{GridError, OrientedBox, SpatialIndex};
 pub use point::{
-    capacity, eta_from_counts, eta_phi2, non_data_count, point_separability, PointSeparability,
+    capacities, capacity, eta_from_counts, eta_phi2, eta_phi2_ratio, non_data_count,
+    point_separability, PointSeparability,
 };
 pub use search::{
     Best, BestRule, BoundaryStats, Cuboid, Delta, SearchError, SearchOutcome, SearchScratch,

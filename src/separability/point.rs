@@ -62,13 +62,42 @@ pub fn capacity(volume: f64, delta: f64) -> f64 {
     // ⌊q⌋ of a non-negative q below 2⁵² is its truncation, which compiles to
     // two conversions instead of a libm `floor` call (this runs per boundary
     // of every search); larger finite values are already integers.
-    if q < 4_503_599_627_370_496.0 {
-        (q as u64) as f64
+    if q < TWO_52 {
+        (q as i64) as f64
     } else if q.is_finite() {
         q
     } else {
         0.0
     }
+}
+
+/// 2⁵²: every f64 at or above it is an integer.
+const TWO_52: f64 = 4_503_599_627_370_496.0;
+
+/// `out[j] = capacity(unit_volume · j, delta)` for `j` in `0..count`,
+/// bit-identical to [`capacity`] but with one division per call instead of
+/// one per entry (the search needs the capacities of all `K` region sizes).
+///
+/// `q = (unit_volume·j)·(1/δ³)` is within 3.1 ulps of the quotient that
+/// [`capacity`] rounds, so the two floors agree unless `q` lies within that
+/// distance of an integer; such entries (and every invalid input) take the
+/// division of [`capacity`].
+pub fn capacities(unit_volume: f64, delta: f64, count: usize, out: &mut Vec<f64>) {
+    out.clear();
+    let valid = delta.is_finite() && unit_volume.is_finite() && delta > 0.0 && unit_volume > 0.0;
+    let inv = 1.0 / (delta * delta * delta);
+    out.extend((0..count).map(|j| {
+        let volume = unit_volume * j as f64;
+        let q = volume * inv;
+        if valid && q > 0.0 && q < TWO_52 {
+            let t = (q as i64) as f64;
+            let margin = 4e-15 * q;
+            if q - t > margin && t + 1.0 - q > margin {
+                return t;
+            }
+        }
+        capacity(volume, delta)
+    }));
 }
 
 /// η_p from the four counts (paper Eqs. 7, 8); 0 where undefined.
@@ -109,12 +138,21 @@ pub fn eta_from_counts(o1: f64, b1: f64, o2: f64, b2: f64) -> f64 {
 /// the reported value.
 #[inline]
 pub fn eta_phi2(o1: f64, b1: f64, o2: f64, b2: f64) -> f64 {
+    let [num, den] = eta_phi2_ratio(o1, b1, o2, b2);
+    num / den
+}
+
+/// [`eta_phi2`] as an unevaluated ratio `[num, den]` with `den > 0`
+/// (`[0, 1]` where η_p is 0), so that values can be compared by
+/// cross-multiplication without a division.
+#[inline]
+pub fn eta_phi2_ratio(o1: f64, b1: f64, o2: f64, b2: f64) -> [f64; 2] {
     let den = (o1 + b1) * (o2 + b2) * ((o1 + o2) * (b1 + b2));
     if !(den.is_finite() && den > 0.0) {
-        return 0.0;
+        return [0.0, 1.0];
     }
     let d = o1 * b2 - o2 * b1;
-    d * d / den
+    [d * d, den]
 }
 
 /// Evaluate Eqs. 4, 7 and 8 for regions with `o1`, `o2` actual points and
@@ -160,6 +198,39 @@ mod tests {
         for v in [0.1, 0.7, 1.0, 3.3, 1e6, 1e15, 4.5e15, 1e17] {
             let d = 0.037;
             assert_eq!(capacity(v, d), (v / (d * d * d)).floor(), "{v}");
+        }
+    }
+
+    #[test]
+    fn capacities_match_capacity() {
+        let mut out = Vec::new();
+        // Exact multiples: unit volume 8·δ³ gives integer quotients 8j,
+        // where a rounded reciprocal could land just below the integer.
+        let mut units: Vec<(f64, f64)> = vec![(1.0, 0.5), (0.008, 0.1), (1.0, 0.3), (3.0, 0.1)];
+        let mut x = 0.123_456_789f64;
+        for _ in 0..2000 {
+            x = (x * 9.87 + 0.31).fract();
+            units.push((1e-6 + x * 0.02, 0.001 + x.sqrt() * 0.05));
+        }
+        units.extend([
+            (0.0, 0.1),
+            (-1.0, 0.1),
+            (1.0, 0.0),
+            (1.0, -0.5),
+            (1.0, f64::NAN),
+        ]);
+        units.extend([(f64::INFINITY, 0.1), (1e300, 1e-100), (1.0, 1e-120)]);
+        for (unit, delta) in units {
+            capacities(unit, delta, 40, &mut out);
+            assert_eq!(out.len(), 40);
+            for (j, &c) in out.iter().enumerate() {
+                let want = capacity(unit * j as f64, delta);
+                assert_eq!(
+                    c.to_bits(),
+                    want.to_bits(),
+                    "unit {unit} delta {delta} j {j}"
+                );
+            }
         }
     }
 

@@ -40,7 +40,7 @@ use crate::cloud::Vec3;
 use crate::density::local_mean;
 use crate::separability::attribute::{fisher_ratio, AttributeSet};
 use crate::separability::grid::{OrientedBox, SpatialIndex};
-use crate::separability::point::{capacity, eta_from_counts, eta_phi2};
+use crate::separability::point::{capacities, eta_from_counts, eta_phi2_ratio};
 use thiserror::Error;
 
 /// Errors of the oriented search.
@@ -257,6 +257,7 @@ pub struct SearchOutcome {
 #[derive(Debug, Clone, Default)]
 pub struct SearchScratch {
     offsets: Vec<f64>,
+    sq_distances: Vec<f64>,
     indices: Vec<u32>,
     slab_counts: Vec<u32>,
     profile: Vec<BoundaryStats>,
@@ -275,8 +276,10 @@ pub struct SearchScratch {
     half_depth: f64,
     /// Eq. 4 capacity of a region of `j` slabs, `j` in `0..=K`.
     capacity: Vec<f64>,
-    /// Screening key per boundary of [`Searcher::search_best`].
-    screen: Vec<f64>,
+    /// `[M_w M_h Δ, δ]` the capacity table was computed for.
+    capacity_key: Option<[f64; 2]>,
+    /// Screening key `[num, den]` per boundary of [`Searcher::search_best`].
+    screen: Vec<[f64; 2]>,
 }
 
 impl SearchScratch {
@@ -293,6 +296,12 @@ impl SearchScratch {
     /// Signed offsets `t = (p − c)·n` of the points gathered by the last search.
     pub fn offsets(&self) -> &[f64] {
         &self.offsets
+    }
+
+    /// Squared distances `|p − c|²` of the gathered points from the centre
+    /// (parallel to [`Self::offsets`]).
+    pub fn sq_distances(&self) -> &[f64] {
+        &self.sq_distances
     }
 
     /// Cloud indices of the gathered points (parallel to [`Self::offsets`]).
@@ -455,7 +464,7 @@ impl<'a> Searcher<'a> {
     ///
     /// Without attributes η_p is evaluated only where it can be the maximum:
     /// each admitted boundary is screened with the one-division closed form
-    /// [`eta_phi2`], and [`eta_from_counts`] (the value reported, identical
+    /// [`eta_phi2`](crate::separability::point::eta_phi2), and [`eta_from_counts`] (the value reported, identical
     /// to the profile's) runs only for boundaries within a rounding
     /// tolerance of the screened maximum.
     ///
@@ -498,6 +507,7 @@ impl<'a> Searcher<'a> {
         let keep_slab = self.attributes.is_some();
 
         scratch.offsets.clear();
+        scratch.sq_distances.clear();
         scratch.indices.clear();
         scratch.slab_of.clear();
         scratch.slab_counts.clear();
@@ -505,17 +515,19 @@ impl<'a> Searcher<'a> {
         scratch.slab_width = slab_width;
         scratch.half_depth = half_depth;
         {
-            let (offsets, indices, counts, slab_of) = (
+            let (offsets, sq_distances, indices, counts, slab_of) = (
                 &mut scratch.offsets,
+                &mut scratch.sq_distances,
                 &mut scratch.indices,
                 &mut scratch.slab_counts,
                 &mut scratch.slab_of,
             );
-            self.index.for_each_in_box(&obb, |i, s| {
+            self.index.for_each_in_box(&obb, |i, s, r2| {
                 let t = s[0];
                 let slab = (((t + half_depth) * inv_slab) as usize).min(slabs - 1);
                 counts[slab] += 1;
                 offsets.push(t);
+                sq_distances.push(r2);
                 indices.push(i);
                 if keep_slab {
                     slab_of.push(slab as u32);
@@ -534,11 +546,13 @@ impl<'a> Searcher<'a> {
         // serves both sides. The volume expression is the one of the
         // profile's definition, so the counts are bit-identical to
         // `non_data_count(area·Δ·j, δ, o)`.
-        let area = cuboid.width * cuboid.height;
-        scratch.capacity.clear();
-        scratch
-            .capacity
-            .extend((0..slabs).map(|j| capacity(area * slab_width * j as f64, delta)));
+        // Consecutive membrane samples often share the cross-section (clamped
+        // at its minimum) and δ: the table is then reused.
+        let key = [cuboid.width * cuboid.height * slab_width, delta];
+        if scratch.capacity_key != Some(key) || scratch.capacity.len() != slabs {
+            capacities(key[0], delta, slabs, &mut scratch.capacity);
+            scratch.capacity_key = Some(key);
+        }
         Ok((gathered, delta))
     }
 
@@ -654,7 +668,7 @@ impl<'a> Searcher<'a> {
     /// two counts are exact, so (a) `μ1 < μ2` is decided exactly by
     /// `o1·n2 < o2·n1`, which agrees with comparing the rounded quotients
     /// (distinct fractions with `n1·n2 < 2⁵²` differ by more than their
-    /// rounding), and (b) [`eta_phi2`] is within 8 ulps of the exact η_p while
+    /// rounding), and (b) [`eta_phi2`](crate::separability::point::eta_phi2) is within 8 ulps of the exact η_p while
     /// [`eta_from_counts`] is within `12u·N/min(O, B) + 6u ≤ 12u·N + 6u` of it
     /// (the cancellation in `μ_r − μ_T`; `N` counts, `O`, `B` actual and
     /// non-data totals, `u = 2⁻⁵³`). A boundary screened more than
@@ -668,8 +682,11 @@ impl<'a> Searcher<'a> {
         let cap_max = scratch.capacity.iter().copied().fold(0.0, f64::max);
         let n_max = 2.0 * cap_max + f64::from(total);
         let exact = n_max < EXACT;
+        // Screening keys as ratios [num, den] (den > 0), compared by
+        // cross-multiplication: no division per boundary. Rejected
+        // boundaries get −1, below any threshold (tol < 1 here).
         scratch.screen.clear();
-        let mut top = f64::NEG_INFINITY;
+        let mut top: Option<[f64; 2]> = None;
         let mut o1 = 0u32;
         for k in 0..k_count {
             o1 += scratch.slab_counts[k];
@@ -685,22 +702,25 @@ impl<'a> Searcher<'a> {
                     BestRule::InnerDenser => fo1 / n1 >= fo2 / n2,
                 };
             let key = match (admitted, exact) {
-                (false, _) => f64::NEG_INFINITY,
-                (true, true) => eta_phi2(fo1, b1, fo2, b2),
-                (true, false) => 1.0,
+                (false, _) => [-1.0, 1.0],
+                (true, true) => eta_phi2_ratio(fo1, b1, fo2, b2),
+                (true, false) => [1.0, 1.0],
             };
-            top = top.max(key);
+            if admitted && top.is_none_or(|t| key[0] * t[1] > t[0] * key[1]) {
+                top = Some(key);
+            }
             scratch.screen.push(key);
         }
-        if top == f64::NEG_INFINITY {
-            return None;
-        }
-        let floor = top - 1e-14 * (n_max + 2.0);
+        // A cross-multiplied maximum off by rounding only lowers the
+        // threshold (more candidates), which the tolerance covers anyway.
+        let top = top?;
+        let floor = top[0] / top[1] - 1e-14 * (n_max + 2.0);
         let mut best: Option<Best> = None;
         let mut o1 = 0u32;
         for k in 0..k_count {
             o1 += scratch.slab_counts[k];
-            if scratch.screen[k] < floor {
+            let [num, den] = scratch.screen[k];
+            if num < floor * den {
                 continue;
             }
             let [fo1, b1, fo2, b2] = Self::counts(scratch, k, o1, total);
