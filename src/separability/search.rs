@@ -962,6 +962,103 @@ mod tests {
         assert!((down.offset - 0.05).abs() <= dw + 1e-9, "{down:?}");
     }
 
+    /// The first largest positive η of the profile among the boundaries `rule` admits.
+    fn scan(profile: &[BoundaryStats], rule: BestRule) -> Option<(usize, f64, f64)> {
+        let mut best: Option<(usize, f64, f64)> = None;
+        for (k, st) in profile.iter().enumerate() {
+            if st.eta <= best.map_or(0.0, |b| b.2) {
+                continue;
+            }
+            if rule == BestRule::InnerDenser && st.mu1 < st.mu2 {
+                continue;
+            }
+            best = Some((k, st.offset, st.eta));
+        }
+        best
+    }
+
+    #[test]
+    fn search_best_matches_profile_scan() {
+        use crate::separability::attribute::AttributeSet;
+        let mut rng = ChaCha8Rng::seed_from_u64(21);
+        // A noisy double layer plus a sparse background, and a regular sheet
+        // (many equal counts and ties between boundaries).
+        let mut pts: Vec<Vec3> = (0..3000)
+            .map(|i| {
+                let z = if i % 3 == 0 { 0.1 } else { -0.05 };
+                Vec3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    z + rng.random_range(-0.02..0.02),
+                )
+            })
+            .collect();
+        pts.extend((0..500).map(|_| {
+            Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-0.5..0.5),
+            )
+        }));
+        pts.extend(sheet(0.3, 0.05));
+        let per_point: Vec<f64> = (0..pts.len())
+            .map(|i| 0.01 + (i % 5) as f64 * 0.01)
+            .collect();
+        let vals: Vec<f32> = pts.iter().map(|p| (p.z * 10.0) as f32).collect();
+        let set = AttributeSet::new(1.0, &[("a", &vals, 1.0)]).unwrap();
+        let idx = SpatialIndex::new(&pts).unwrap();
+        let mut full = SearchScratch::new();
+        let mut lean = SearchScratch::new();
+        let mut found = 0;
+        for q in 0..600 {
+            let k = 1 + q % 40;
+            // Global δ from typical to tiny (capacities beyond 2²⁶: the
+            // unscreened branch), local δ, and the weighted mode.
+            let delta = match q % 5 {
+                0 => Delta::Global(0.02),
+                1 => Delta::Global(1e-4),
+                2 => Delta::Local(&per_point),
+                _ => Delta::Global(rng.random_range(0.005..0.08)),
+            };
+            let s = Searcher::new(&idx, delta, k).unwrap();
+            let s = if q % 7 == 0 {
+                s.with_attributes(&set).unwrap()
+            } else {
+                s
+            };
+            let cub = Cuboid::new(
+                Vec3::new(
+                    rng.random_range(-0.8..0.8),
+                    rng.random_range(-0.8..0.8),
+                    rng.random_range(-0.2..0.3),
+                ),
+                Vec3::new(
+                    rng.random_range(-0.3..0.3),
+                    rng.random_range(-0.3..0.3),
+                    if q % 2 == 0 { 1.0 } else { -1.0 },
+                ),
+                rng.random_range(0.02..0.3),
+                rng.random_range(0.02..0.3),
+                rng.random_range(0.1..0.8),
+            );
+            let a = s.search(&cub, &mut full).unwrap();
+            for rule in [BestRule::Any, BestRule::InnerDenser] {
+                let b = s.search_best(&cub, rule, &mut lean).unwrap();
+                assert_eq!((a.gathered, a.delta), (b.gathered, b.delta));
+                assert_eq!(full.offsets(), lean.offsets());
+                assert_eq!(full.slab_counts(), lean.slab_counts());
+                let want = scan(full.profile(), rule);
+                let got = b.best.map(|x| (x.boundary, x.offset, x.eta));
+                assert_eq!(got, want, "query {q} rule {rule:?}");
+                if rule == BestRule::Any {
+                    assert_eq!(a.best, b.best);
+                }
+                found += usize::from(got.is_some());
+            }
+        }
+        assert!(found > 600, "{found}");
+    }
+
     #[test]
     fn weighted_profile_matches_brute_force() {
         use crate::separability::attribute::AttributeSet;
