@@ -1,6 +1,7 @@
 //! Benchmarks of the measuring core (issue 2): the oriented search primitive
 //! (paper Eq. 7 over K boundaries) on a 20,000-point cloud at a typical
-//! cuboid (~60 points gathered, K = 30), and the k-NN density (paper Eq. 5)
+//! cuboid (~60 points gathered, K = 30; full profile and the membrane's
+//! best-boundary path), and the k-NN density (paper Eq. 5)
 //! of 20,000 points, both single-threaded.
 #![allow(missing_docs, clippy::unwrap_used)]
 
@@ -8,7 +9,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sepmem::density::Density;
-use sepmem::separability::{Cuboid, Delta, SearchScratch, Searcher, SpatialIndex};
+use sepmem::separability::{BestRule, Cuboid, Delta, SearchScratch, Searcher, SpatialIndex};
 use sepmem::Vec3;
 use std::hint::black_box;
 
@@ -56,28 +57,44 @@ fn bench_search(c: &mut Criterion) {
         &searcher,
         &cuboids,
         &mut scratch,
+        None,
+    );
+    // The membrane's path: best boundary under the inside-denser rule, no profile.
+    bench_cuboids(
+        c,
+        "oriented_search_best_20k_K30",
+        &searcher,
+        &cuboids,
+        &mut scratch,
+        Some(BestRule::InnerDenser),
     );
     for cell in [0.02, 0.06] {
         let index = SpatialIndex::with_cell_size(&pts, cell).unwrap();
         let searcher = Searcher::new(&index, Delta::Global(delta), 30).unwrap();
         let name = format!("oriented_search_20k_K30_cell{cell}");
-        bench_cuboids(c, &name, &searcher, &cuboids, &mut scratch);
+        bench_cuboids(c, &name, &searcher, &cuboids, &mut scratch, None);
     }
 }
 
-/// Time one search per iteration, cycling through `cuboids`.
+/// Time one search per iteration, cycling through `cuboids`: the full
+/// profile ([`Searcher::search`]) or, with a rule, [`Searcher::search_best`].
 fn bench_cuboids(
     c: &mut Criterion,
     name: &str,
     searcher: &Searcher<'_>,
     cuboids: &[Cuboid],
     scratch: &mut SearchScratch,
+    rule: Option<BestRule>,
 ) {
     let mut i = 0;
     c.bench_function(name, |b| {
         b.iter(|| {
             i = (i + 1) % cuboids.len();
-            black_box(searcher.search(black_box(&cuboids[i]), scratch).unwrap())
+            let cuboid = black_box(&cuboids[i]);
+            black_box(match rule {
+                Some(r) => searcher.search_best(cuboid, r, scratch).unwrap(),
+                None => searcher.search(cuboid, scratch).unwrap(),
+            })
         })
     });
 }
