@@ -221,6 +221,8 @@ struct Stepper<'a> {
     searcher: Searcher<'a>,
     delta: f64,
     outside: Option<&'a OutsideGrid>,
+    /// The single view, if any: beyond the occupancy grid it decides what is outside.
+    view: Option<&'a view::ViewBuffer>,
     cross_max: f64,
     /// Centroid of the points: the inward force never moves a sample away from it.
     center: Vec3,
@@ -323,10 +325,7 @@ impl Stepper<'_> {
         // Inward means toward the object: where the surface has folded over
         // (its normal facing the centroid) "inward" would push it outward and
         // inflate the membrane, so the force is withheld there.
-        if allow_inward
-            && n.dot(&(sp.p - self.center)) > 0.0
-            && self.outside.is_some_and(|g| g.is_outside(&sp.p))
-        {
+        if allow_inward && n.dot(&(sp.p - self.center)) > 0.0 && self.is_outside(&sp.p) {
             return SampleOut {
                 shift: -cfg.inward_step * depth,
                 eta: 0.0,
@@ -335,6 +334,12 @@ impl Stepper<'_> {
             };
         }
         still
+    }
+
+    /// Whether the inward force may act at `p` ([`view::outside_at`]).
+    fn is_outside(&self, p: &Vec3) -> bool {
+        self.outside
+            .is_some_and(|grid| view::outside_at(grid, self.view, p))
     }
 
     /// Search every sample of `layout` (in parallel, coarse row chunks).
@@ -632,6 +637,7 @@ pub(crate) fn run(
         searcher,
         delta,
         outside: outside.as_ref(),
+        view: view.as_ref(),
         cross_max: cfg.cross_max * scale,
         center: points.iter().sum::<Vec3>() / points.len() as f64,
     };

@@ -174,6 +174,21 @@ impl OutsideGrid {
         self.outside[(z * ny + y) * nx + x]
     }
 
+    /// The label of the cell holding `p`: `Some(true)` outside, `Some(false)`
+    /// inside or occupied, `None` beyond the grid (where nothing was measured).
+    pub fn label(&self, p: &Vec3) -> Option<bool> {
+        let q = (p - self.origin) * self.inv_voxel;
+        if !(q.x >= 0.0 && q.y >= 0.0 && q.z >= 0.0) {
+            return None;
+        }
+        let (x, y, z) = (q.x as usize, q.y as usize, q.z as usize);
+        let [nx, ny, nz] = self.dims;
+        if x >= nx || y >= ny || z >= nz {
+            return None;
+        }
+        Some(self.outside[(z * ny + y) * nx + x])
+    }
+
     /// Keep the outside label only where `keep(cell centre)` holds (e.g. only
     /// in space a camera saw empty, [`super::view::ViewBuffer::is_seen_free`]).
     pub fn restrict(&mut self, keep: impl Fn(&Vec3) -> bool) {
@@ -215,6 +230,10 @@ mod tests {
         assert!(!g.is_outside(&Vec3::new(0.5, 0.0, 0.0)));
         assert!(g.is_outside(&Vec3::new(1.3, 0.0, 0.0)));
         assert!(g.is_outside(&Vec3::new(5.0, 5.0, 5.0)));
+        // Labels exist only on the grid: beyond it nothing was measured.
+        assert_eq!(g.label(&Vec3::zeros()), Some(false));
+        assert_eq!(g.label(&Vec3::new(5.0, 5.0, 5.0)), None);
+        assert_eq!(g.label(&Vec3::new(-5.0, 0.0, 0.0)), None);
         // A bowl (lower hemisphere only): its opening is outside.
         let bowl: Vec<Vec3> = pts.iter().copied().filter(|p| p.z < 0.0).collect();
         let g = OutsideGrid::new(&bowl, 0.1, 11, 1 << 20).unwrap();

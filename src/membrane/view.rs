@@ -31,6 +31,7 @@
 //!    reported as `points_completed`; the separability's non-data counts are
 //!    still never materialised.
 
+use super::occupancy::OutsideGrid;
 use crate::cloud::Vec3;
 use serde::{Deserialize, Serialize};
 
@@ -290,6 +291,19 @@ impl ViewBuffer {
     }
 }
 
+/// Whether `p` is outside the object, for the inward force: the occupancy
+/// grid's label where it has one (already restricted to seen-free space for
+/// a single view). Beyond the grid nothing was measured: with a single view
+/// that space is outside only where the camera saw it empty or beyond the
+/// completion's back, never in the occluded back. (The membrane's initial
+/// surface and its poles lie beyond the grid; pulling the unseen back in
+/// there folded it into loops.) Without a view, everything beyond the grid
+/// is outside.
+pub fn outside_at(grid: &OutsideGrid, view: Option<&ViewBuffer>, p: &Vec3) -> bool {
+    grid.label(p)
+        .unwrap_or_else(|| view.is_none_or(|vb| vb.is_seen_free(p) || vb.is_beyond_back(p)))
+}
+
 /// The view of `points` for `viewpoint` (see the module docs): `None` for
 /// `"none"`, and for `"auto"` unless the origin sees the cloud as one layer.
 pub fn resolve(viewpoint: Viewpoint, points: &[Vec3], delta: f64) -> Option<ViewBuffer> {
@@ -352,6 +366,30 @@ mod tests {
         assert!(resolve(Viewpoint::Mode(ViewMode::Auto), &around, 0.05).is_none());
         assert!(resolve(Viewpoint::Mode(ViewMode::None), &cap, delta).is_none());
         assert!(resolve(Viewpoint::Point([0.0, 0.0, 0.0]), &cap, delta).is_some());
+    }
+
+    #[test]
+    fn beyond_the_grid_only_seen_free_space_is_outside() {
+        let c = Vec3::new(0.0, 0.0, 1.0);
+        let r = 0.1;
+        let full = sphere(8000, r, c);
+        let delta = (4.0 * std::f64::consts::PI * r * r / 8000.0).sqrt();
+        let cap: Vec<Vec3> = full.iter().copied().filter(|p| p.z < c.z).collect();
+        let vb = ViewBuffer::new(&cap, Vec3::zeros(), delta).unwrap();
+        let mut grid = OutsideGrid::new(&cap, 2.0 * delta, 20, 1 << 22).unwrap();
+        grid.restrict(|q| vb.is_seen_free(q));
+        // Behind the cap, beyond the grid (the cap ends at z = 1): occluded,
+        // so not outside with the view, outside without it.
+        let back = Vec3::new(0.0, 0.0, 1.15);
+        assert_eq!(grid.label(&back), None);
+        assert!(!outside_at(&grid, Some(&vb), &back));
+        assert!(outside_at(&grid, None, &back));
+        // In front of the cap, beyond the grid: seen free, outside either way.
+        let front = Vec3::new(0.0, 0.0, 0.7);
+        assert_eq!(grid.label(&front), None);
+        assert!(outside_at(&grid, Some(&vb), &front));
+        // On the grid the (restricted) label decides.
+        assert!(!outside_at(&grid, Some(&vb), &Vec3::new(0.0, 0.0, 0.95)));
     }
 
     #[test]
