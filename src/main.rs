@@ -137,6 +137,13 @@ enum Command {
         /// Shared datasets directory (default: $SEPMEM_DATASETS, else ../shared/datasets).
         #[arg(long)]
         datasets: Option<PathBuf>,
+        /// Configuration file (.json5 or .toml) holding the membrane keys to
+        /// change (benchmark a tuned configuration; default: the embedded one).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Override one parameter: section.key=value (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
     },
     /// Run the live node: subscribe to PointCloud2 topics over zenoh
     /// (rmw_zenoh keys by default), publish meshes, markers and diagnostics,
@@ -228,7 +235,12 @@ fn main() -> Result<()> {
             out,
             only,
             datasets,
-        } => commands::bench::run(quick, &out, &only, datasets),
+            config,
+            set,
+        } => {
+            let cfg = sepmem::config::Config::load(config.as_deref(), &set)?;
+            commands::bench::run(quick, &out, &only, datasets, cfg.membrane)
+        }
         Command::BenchNode(args) => commands::bench_node::run(&args),
         Command::Node { config, set } => commands::node::run_node(config.as_deref(), &set),
         Command::Play {

@@ -3,10 +3,18 @@
 
 use anyhow::{Context, Result};
 use sepmem::bench::{self, BenchOptions};
+use sepmem::membrane::MembraneConfig;
 use std::path::{Path, PathBuf};
 
-/// Run the benchmark and write its Markdown and JSON reports into `out`.
-pub fn run(quick: bool, out: &Path, only: &[String], datasets: Option<PathBuf>) -> Result<()> {
+/// Run the benchmark with the membrane configuration `membrane` and write
+/// its Markdown and JSON reports into `out`.
+pub fn run(
+    quick: bool,
+    out: &Path,
+    only: &[String],
+    datasets: Option<PathBuf>,
+    membrane: MembraneConfig,
+) -> Result<()> {
     let datasets = datasets.or_else(default_datasets);
     match &datasets {
         Some(d) if d.is_dir() => eprintln!("bench: datasets at {}", d.display()),
@@ -19,6 +27,7 @@ pub fn run(quick: bool, out: &Path, only: &[String], datasets: Option<PathBuf>) 
     let datasets = datasets.filter(|d| d.is_dir());
     let mut opts =
         BenchOptions::new(quick, datasets).context("loading the default configuration")?;
+    opts.membrane = membrane;
     opts.only = only
         .iter()
         .flat_map(|o| o.split(','))

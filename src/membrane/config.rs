@@ -140,7 +140,7 @@ impl Default for MembraneConfig {
             knn_k: 8,
             outlier_factor: 2.0,
             local_delta: false,
-            pole_axis: PoleAxis::Z,
+            pole_axis: PoleAxis::Shortest,
             init_quantile: 0.002,
             init_margin: 1.05,
             grid_start: [8, 5],
