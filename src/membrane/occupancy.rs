@@ -162,16 +162,7 @@ impl OutsideGrid {
     /// True when `p` lies in empty space connected to the outside (points
     /// beyond the grid are outside).
     pub fn is_outside(&self, p: &Vec3) -> bool {
-        let q = (p - self.origin) * self.inv_voxel;
-        if !(q.x >= 0.0 && q.y >= 0.0 && q.z >= 0.0) {
-            return true;
-        }
-        let (x, y, z) = (q.x as usize, q.y as usize, q.z as usize);
-        let [nx, ny, nz] = self.dims;
-        if x >= nx || y >= ny || z >= nz {
-            return true;
-        }
-        self.outside[(z * ny + y) * nx + x]
+        self.label(p).unwrap_or(true)
     }
 
     /// The label of the cell holding `p`: `Some(true)` outside, `Some(false)`

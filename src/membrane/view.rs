@@ -368,14 +368,21 @@ mod tests {
         assert!(resolve(Viewpoint::Point([0.0, 0.0, 0.0]), &cap, delta).is_some());
     }
 
-    #[test]
-    fn beyond_the_grid_only_seen_free_space_is_outside() {
+    /// The front cap (z < 1) of a sphere of radius 0.1 at (0, 0, 1), seen
+    /// from the origin: (centre, radius, δ, cap, view).
+    fn sphere_cap_view() -> (Vec3, f64, f64, Vec<Vec3>, ViewBuffer) {
         let c = Vec3::new(0.0, 0.0, 1.0);
         let r = 0.1;
         let full = sphere(8000, r, c);
         let delta = (4.0 * std::f64::consts::PI * r * r / 8000.0).sqrt();
         let cap: Vec<Vec3> = full.iter().copied().filter(|p| p.z < c.z).collect();
         let vb = ViewBuffer::new(&cap, Vec3::zeros(), delta).unwrap();
+        (c, r, delta, cap, vb)
+    }
+
+    #[test]
+    fn beyond_the_grid_only_seen_free_space_is_outside() {
+        let (_, _, delta, cap, vb) = sphere_cap_view();
         let mut grid = OutsideGrid::new(&cap, 2.0 * delta, 20, 1 << 22).unwrap();
         grid.restrict(|q| vb.is_seen_free(q));
         // Behind the cap, beyond the grid (the cap ends at z = 1): occluded,
@@ -394,12 +401,7 @@ mod tests {
 
     #[test]
     fn visibility_and_mirror_completion_of_a_sphere_cap() {
-        let c = Vec3::new(0.0, 0.0, 1.0);
-        let r = 0.1;
-        let full = sphere(8000, r, c);
-        let delta = (4.0 * std::f64::consts::PI * r * r / 8000.0).sqrt();
-        let cap: Vec<Vec3> = full.iter().copied().filter(|p| p.z < c.z).collect();
-        let vb = ViewBuffer::new(&cap, Vec3::zeros(), delta).unwrap();
+        let (c, r, _, cap, vb) = sphere_cap_view();
         // In front of the cap and beside the sphere: seen free; the centre and
         // the back: occluded.
         assert!(vb.is_seen_free(&Vec3::new(0.0, 0.0, 0.85)));
