@@ -62,6 +62,13 @@ async fn play_and_score(bag_file: &str, node_name: &str, min_f: f64) -> BTreeMap
             "pipeline.deadline_ms=0".into(),
             "membrane.threads=1".into(),
             "node.diagnostics_period_ms=200".into(),
+            // Lock step: the next frame is published after the test's own
+            // engine has run on it, which on a loaded machine can take
+            // seconds; no stream may be evicted as silent meanwhile.
+            "node.evict_after_ms=60000".into(),
+            // Lock step waits for every output: none may be dropped when the
+            // loaded machine's zenoh tx thread falls behind.
+            "node.outputs_keep_all=true".into(),
             format!("node.transport.node_name=\"{node_name}\""),
         ],
     )
@@ -152,9 +159,26 @@ async fn play_and_score(bag_file: &str, node_name: &str, min_f: f64) -> BTreeMap
             if processed_len > 1 {
                 assert!(mesh.topology().is_watertight(), "{id} {stamp}");
             } else {
+                let rep = &r.reconstruction.report;
                 assert!(
                     worst < 1e-9,
-                    "{id} {stamp}: differs from the engine's mesh by {worst}"
+                    "{id} {stamp}: differs from the engine's mesh by {worst}; node: {} \
+                     iterations, warm {}, start {}, stop {}, grid {}x{}, eta {}; engine: {} \
+                     iterations, warm {}, start {}, stop {}, grid {:?}, eta {}; meshes so far {}",
+                    msg.iterations,
+                    msg.warm_start,
+                    msg.start_reason,
+                    msg.stop_reason,
+                    msg.grid_m,
+                    msg.grid_l,
+                    msg.global_separability,
+                    r.iterations,
+                    r.path == sepmem::pipeline::StartPath::Warm,
+                    r.reason,
+                    rep.stop,
+                    rep.grid,
+                    rep.eta_final as f32,
+                    inbox_lock(&meshes).len(),
                 );
             }
             let gt = truth.posed_mesh(&id, stamp).unwrap();
@@ -196,6 +220,13 @@ async fn play_and_score(bag_file: &str, node_name: &str, min_f: f64) -> BTreeMap
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn synth_bags_through_the_node_give_meshes_that_match_ground_truth() {
+    // `SEPMEM_LOG=sepmem=info` shows the node's log (stream births, evictions).
+    if let Ok(filter) = std::env::var("SEPMEM_LOG") {
+        let _ = tracing_subscriber::fmt()
+            .with_env_filter(tracing_subscriber::EnvFilter::new(filter))
+            .with_test_writer()
+            .try_init();
+    }
     let one = play_and_score("synth_ellipsoid.mcap", "e2e_one", MIN_F_ELLIPSOID).await;
     assert_eq!(one.len(), 1);
     assert_eq!(one["/synth/ellipsoid/points"].len(), 12);

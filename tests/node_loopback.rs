@@ -460,3 +460,68 @@ async fn liveliness(h: &Participant) -> Vec<Token> {
     }
     out
 }
+
+/// A stream is evicted only after `evict_after_ms` of real silence: never
+/// while one of its frames is being processed, and silence counts from the
+/// end of the last processing (a publisher that waits for each result, as a
+/// lock-step player does, is not silent). Eviction is seen as the
+/// processor's DELETEALL markers.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_busy_stream_is_not_evicted_and_a_silent_one_is() {
+    let (h, mut cfg) = harness("evb").await;
+    cfg.evict_after_ms = 1000;
+    cfg.diagnostics_period_ms = 50;
+    let seen: Arc<Mutex<Vec<(String, u64)>>> = Arc::default();
+    let backend = Arc::new(TestBackend { seen: seen.clone() });
+    let (stop_tx, node) = spawn_node(cfg, backend);
+    let (_msub, markers) = collect(
+        &h,
+        "/evb/**",
+        &any_type("visualization_msgs/msg/MarkerArray"),
+    )
+    .await;
+    let p = h
+        .publisher("/evb/points", &pc2(), Qos::SENSOR_DATA)
+        .await
+        .unwrap();
+    let processed = |i: u64| seen.lock().unwrap().iter().any(|(_, k)| *k == i);
+    // Probe until the node is subscribed (frame 0).
+    for k in 0.. {
+        if processed(0) {
+            break;
+        }
+        assert!(k < 800, "probe not processed");
+        p.put(payload(0, 0)).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(25)).await;
+    }
+    // Frame 1 computes for 2.5 × the eviction time; frame 2 follows as soon
+    // as frame 1 is done.
+    p.put(payload(1, 2500)).await.unwrap();
+    wait_for(|| processed(1), "slow frame").await;
+    p.put(payload(2, 0)).await.unwrap();
+    wait_for(|| processed(2), "frame after the slow one").await;
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    assert!(
+        markers.lock().unwrap().is_empty(),
+        "evicted while busy or right after a frame"
+    );
+    // Now silence: the stream is evicted (its DELETEALL markers arrive).
+    wait_for(
+        || !markers.lock().unwrap().is_empty(),
+        "eviction of the silent stream",
+    )
+    .await;
+    stop_tx.send(()).unwrap();
+    let summary: NodeSummary = tokio::time::timeout(Duration::from_secs(30), node)
+        .await
+        .unwrap()
+        .unwrap();
+    assert!(summary.clean_shutdown);
+    let s = summary
+        .streams
+        .iter()
+        .find(|s| s.topic == "/evb/points")
+        .unwrap();
+    assert!(s.stale, "{s:?}");
+    assert!(s.frames >= 3, "one processor saw every frame: {s:?}");
+}

@@ -88,6 +88,12 @@ pub struct NodeConfig {
     pub topics: Vec<String>,
     /// Output topic names.
     pub outputs: OutputTopics,
+    /// Output QoS: `false` = RELIABLE + KEEP_LAST(10), which rmw_zenoh maps
+    /// to zenoh's "drop" congestion control (an output the link cannot take
+    /// within about a millisecond is dropped; the node never waits); `true`
+    /// = RELIABLE + KEEP_ALL, mapped to "block" (nothing is dropped, but a
+    /// congested link slows that stream).
+    pub outputs_keep_all: bool,
     /// Period of the `/diagnostics` array, in milliseconds.
     pub diagnostics_period_ms: u64,
     /// A stream silent this long is evicted (state freed, reported STALE).
@@ -105,6 +111,19 @@ pub struct NodeConfig {
 }
 
 impl NodeConfig {
+    /// The QoS of the node's publishers (`outputs_keep_all`).
+    pub fn output_qos(&self) -> crate::transport::liveliness::Qos {
+        use crate::transport::liveliness::Qos;
+        if self.outputs_keep_all {
+            Qos {
+                keep_last: None,
+                ..Qos::DEFAULT_10
+            }
+        } else {
+            Qos::DEFAULT_10
+        }
+    }
+
     /// The rayon pool the frames are computed on (`compute_threads`, 0 = one
     /// per core), so that compute never runs on the transport's threads.
     ///

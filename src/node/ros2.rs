@@ -77,6 +77,15 @@ fn publish_outputs(pubs: &Publishers, topic: &str, outputs: &[Output]) {
     }
 }
 
+/// The publishers' QoS (`node.outputs_keep_all`, as [`NodeConfig::output_qos`]).
+fn output_qos(cfg: &NodeConfig) -> r2r::QosProfile {
+    if cfg.outputs_keep_all {
+        r2r::QosProfile::default().keep_all()
+    } else {
+        r2r::QosProfile::default()
+    }
+}
+
 /// Process frames of `s` on the rayon pool until its slot is empty.
 fn drain(s: &Arc<Stream>, pool: &Arc<rayon::ThreadPool>) {
     if s.busy.swap(true, Ordering::AcqRel) {
@@ -91,6 +100,7 @@ fn drain(s: &Arc<Stream>, pool: &Arc<rayon::ThreadPool>) {
             let mut result = lock(&s.processor).process(&frame);
             let outputs = std::mem::take(&mut result.outputs);
             let _ = s.outputs.send((frame.topic.clone(), outputs));
+            s.slot.touch(now_ns());
             let mut c = lock(&s.counters);
             c.frames += 1;
             c.latency.push((now_ns() - frame.received_ns) as f64 * 1e-9);
@@ -189,7 +199,7 @@ pub fn run(
         .create_publisher_untyped(
             &expand_topic_template(&cfg.outputs.diagnostics, "/"),
             &backend.diagnostics_type().name,
-            r2r::QosProfile::default(),
+            output_qos(cfg),
         )
         .map_err(ros_err)?;
     let deadline = backend
@@ -232,7 +242,7 @@ pub fn run(
                     .create_publisher_untyped(
                         &out,
                         &backend.output_type(kind).name,
-                        r2r::QosProfile::default(),
+                        output_qos(cfg),
                     )
                     .map_err(ros_err)?;
                 pubs.insert(kind, p);
@@ -277,7 +287,9 @@ pub fn run(
         let now = now_ns();
         let mut map = lock(&streams);
         map.retain(|topic, s| {
-            let silent = s.slot.received() > 0 && now - s.slot.last_seen_ns() > evict_after;
+            let silent = s.slot.received() > 0
+                && !s.busy.load(Ordering::Acquire)
+                && now - s.slot.last_seen_ns() > evict_after;
             if silent {
                 tracing::info!(%topic, "evicting silent stream");
                 s.slot.close();

@@ -27,7 +27,7 @@ use crate::transport::liveliness::{EntityKind, Qos};
 use crate::transport::{Participant, Received, RosPublisher};
 use std::collections::{BTreeMap, HashMap};
 use std::future::Future;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, oneshot, watch};
@@ -69,6 +69,8 @@ struct StreamStats {
 struct Stream {
     slot: Arc<LatestSlot<Frame>>,
     stats: Arc<Mutex<StreamStats>>,
+    /// A frame of this stream is being processed (never evicted then).
+    busy: AtomicBool,
 }
 
 /// Counters of samples that never reached a stream.
@@ -174,7 +176,7 @@ where
         .publisher(
             &diag_topic,
             &cfg.transport.advertised(&backend.diagnostics_type()),
-            Qos::DEFAULT_10,
+            cfg.output_qos(),
         )
         .await?;
 
@@ -279,8 +281,11 @@ fn on_sample(shared: &Shared, r: Received, deadline: Duration) {
         sequence,
         deadline: Instant::now() + deadline,
     };
+    // The map stays locked until the frame is in the slot: `evict` must
+    // never see a new stream before its first frame (it would read "silent
+    // since the epoch" and close the slot under the frame).
+    let mut map = lock(&shared.streams);
     let stream = {
-        let mut map = lock(&shared.streams);
         if let Some(s) = map.get(&topic) {
             s.clone()
         } else {
@@ -291,6 +296,7 @@ fn on_sample(shared: &Shared, r: Received, deadline: Duration) {
             let s = Arc::new(Stream {
                 slot: Arc::new(LatestSlot::new()),
                 stats: Arc::new(Mutex::new(StreamStats::default())),
+                busy: AtomicBool::new(false),
             });
             if shared.new_tx.try_send(topic.clone()).is_err() {
                 shared.ignored.over_capacity.fetch_add(1, Ordering::Relaxed);
@@ -301,6 +307,7 @@ fn on_sample(shared: &Shared, r: Received, deadline: Duration) {
         }
     };
     stream.slot.put(frame, r.received_ns);
+    drop(map);
 }
 
 struct StreamCtx {
@@ -339,7 +346,11 @@ async fn stream_task(mut ctx: StreamCtx) -> bool {
     for kind in OutputKind::ALL {
         let out = expand_topic_template(ctx.cfg.outputs.template(kind), &topic);
         let ty = tr.advertised(&ctx.backend.output_type(kind));
-        match ctx.participant.publisher(&out, &ty, Qos::DEFAULT_10).await {
+        match ctx
+            .participant
+            .publisher(&out, &ty, ctx.cfg.output_qos())
+            .await
+        {
             Ok(p) => {
                 pubs.insert(kind, p);
             }
@@ -352,6 +363,7 @@ async fn stream_task(mut ctx: StreamCtx) -> bool {
     loop {
         if let Some(frame) = ctx.stream.slot.take() {
             let Some(mut p) = processor.take() else { break };
+            ctx.stream.busy.store(true, Ordering::Release);
             let (tx, mut rx) = oneshot::channel::<Done>();
             let received_ns = frame.received_ns;
             let source_ns = frame.source_ns;
@@ -382,6 +394,8 @@ async fn stream_task(mut ctx: StreamCtx) -> bool {
                 }
             }
             let now = now_ns();
+            ctx.stream.slot.touch(now);
+            ctx.stream.busy.store(false, Ordering::Release);
             let late = Instant::now() > deadline;
             let mut st = lock(&ctx.stream.stats);
             st.frames += 1;
@@ -454,14 +468,15 @@ fn evict(shared: &Shared, all: &mut BTreeMap<String, Arc<Mutex<StreamStats>>>) {
     let after =
         i64::try_from(shared.cfg.evict_after_ms).unwrap_or(i64::MAX / 2_000_000) * 1_000_000;
     let mut map = lock(&shared.streams);
-    let silent: Vec<String> = map
+    let silent: Vec<(String, i64)> = map
         .iter()
-        .filter(|(_, s)| now - s.slot.last_seen_ns() > after)
-        .map(|(k, _)| k.clone())
+        .filter(|(_, s)| !s.busy.load(Ordering::Acquire))
+        .map(|(k, s)| (k.clone(), now - s.slot.last_seen_ns()))
+        .filter(|(_, silent_ns)| *silent_ns > after)
         .collect();
-    for topic in silent {
+    for (topic, silent_ns) in silent {
         if let Some(s) = map.remove(&topic) {
-            tracing::info!(%topic, "evicting silent stream");
+            tracing::info!(%topic, silent_ms = silent_ns / 1_000_000, "evicting silent stream");
             s.slot.close();
             lock(&s.stats).stale_since_ns = Some(now);
         }

@@ -48,7 +48,7 @@ impl<T> LatestSlot<T> {
             return false;
         }
         self.received.fetch_add(1, Ordering::Relaxed);
-        self.last_seen_ns.store(now_ns, Ordering::Relaxed);
+        self.last_seen_ns.fetch_max(now_ns, Ordering::Relaxed);
         let old = match self.pending.lock() {
             Ok(mut g) => g.replace(item),
             Err(poisoned) => poisoned.into_inner().replace(item),
@@ -102,7 +102,16 @@ impl<T> LatestSlot<T> {
         self.dropped.load(Ordering::Relaxed)
     }
 
-    /// Receive time of the last put (ns since the epoch; 0 before any).
+    /// Mark the consumer active at `now_ns` (when it finishes an item), so
+    /// that silence counts from the later of the last put and the end of the
+    /// last processing: a stream whose frames take long to process, or whose
+    /// publisher waits for each result, is not silent.
+    pub fn touch(&self, now_ns: i64) {
+        self.last_seen_ns.fetch_max(now_ns, Ordering::Relaxed);
+    }
+
+    /// Time of the last put or [`touch`](Self::touch) (ns since the epoch;
+    /// 0 before any).
     pub fn last_seen_ns(&self) -> i64 {
         self.last_seen_ns.load(Ordering::Relaxed)
     }
