@@ -320,7 +320,13 @@ struct StreamCtx {
     stop: watch::Receiver<bool>,
 }
 
-type Done = (Box<dyn TopicProcessor>, super::backend::FrameResult);
+/// What a compute job hands back: the processor, and the frame it took
+/// (receipt time, source stamp, deadline) with its result; `None` when the
+/// slot was empty by the time the job ran.
+type Done = (
+    Box<dyn TopicProcessor>,
+    Option<(i64, Option<i64>, Instant, super::backend::FrameResult)>,
+);
 
 /// One stream's worker; returns whether it stopped cleanly (no abandoned frame).
 async fn stream_task(mut ctx: StreamCtx) -> bool {
@@ -361,31 +367,44 @@ async fn stream_task(mut ctx: StreamCtx) -> bool {
     let shutdown_bound = Duration::from_millis(ctx.cfg.shutdown_timeout_ms);
     let mut clean = true;
     loop {
-        if let Some(frame) = ctx.stream.slot.take() {
+        if ctx.stream.slot.has_pending() {
             let Some(mut p) = processor.take() else { break };
             ctx.stream.busy.store(true, Ordering::Release);
             let (tx, mut rx) = oneshot::channel::<Done>();
-            let received_ns = frame.received_ns;
-            let source_ns = frame.source_ns;
-            let deadline = frame.deadline;
+            // Late binding: the job takes the newest frame when a compute
+            // thread is free, so a frame never ages in the pool's queue while
+            // a newer one waits in the slot (that older one is then counted
+            // as dropped, and the deadline is not spent waiting).
+            let slot = ctx.stream.slot.clone();
             ctx.pool.spawn(move || {
+                let Some(frame) = slot.take() else {
+                    let _ = tx.send((p, None));
+                    return;
+                };
                 let span = tracing::info_span!("frame", topic = %frame.topic, seq = ?frame.sequence);
                 let _enter = span.enter();
                 let result = p.process(&frame);
                 tracing::debug!(objects = result.objects.len(), error = ?result.error, "frame done");
-                let _ = tx.send((p, result));
+                let _ = tx.send((
+                    p,
+                    Some((frame.received_ns, frame.source_ns, frame.deadline, result)),
+                ));
             });
             let stop = ctx.stop.clone();
             let done = tokio::select! {
                 r = &mut rx => r.ok(),
                 () = wait_stop(stop) => tokio::time::timeout(shutdown_bound, &mut rx).await.ok().and_then(Result::ok),
             };
-            let Some((p, result)) = done else {
+            let Some((p, taken)) = done else {
                 tracing::warn!(%topic, "in-flight frame abandoned at shutdown");
                 clean = false;
                 break;
             };
             processor = Some(p);
+            let Some((received_ns, source_ns, deadline, result)) = taken else {
+                ctx.stream.busy.store(false, Ordering::Release);
+                continue;
+            };
             for out in result.outputs {
                 if let Some(publ) = pubs.get(&out.kind) {
                     if let Err(e) = publ.put(out.payload).await {
