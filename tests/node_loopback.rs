@@ -180,6 +180,70 @@ fn spawn_node(
     (stop_tx, node)
 }
 
+/// A node with the test backend, an observer of its markers under
+/// `/{name}/**`, and a publisher on `/{name}/points`.
+struct Rig {
+    seen: Arc<Mutex<Vec<(String, u64)>>>,
+    stop_tx: tokio::sync::oneshot::Sender<()>,
+    node: tokio::task::JoinHandle<NodeSummary>,
+    markers: Inbox,
+    points: sepmem::transport::RosPublisher,
+    _markers_sub: zenoh::pubsub::Subscriber<()>,
+}
+
+async fn rig(h: &Participant, name: &str, cfg: NodeConfig) -> Rig {
+    let seen: Arc<Mutex<Vec<(String, u64)>>> = Arc::default();
+    let backend = Arc::new(TestBackend { seen: seen.clone() });
+    let (stop_tx, node) = spawn_node(cfg, backend);
+    let (_markers_sub, markers) = collect(
+        h,
+        &format!("/{name}/**"),
+        &any_type("visualization_msgs/msg/MarkerArray"),
+    )
+    .await;
+    let points = h
+        .publisher(&format!("/{name}/points"), &pc2(), Qos::SENSOR_DATA)
+        .await
+        .unwrap();
+    Rig {
+        seen,
+        stop_tx,
+        node,
+        markers,
+        points,
+        _markers_sub,
+    }
+}
+
+/// Publish `next()` every 25 ms until `done()` (the node's subscription is
+/// matched and the frames came through); at most 20 s.
+async fn probe(
+    p: &sepmem::transport::RosPublisher,
+    done: impl Fn() -> bool,
+    mut next: impl FnMut() -> Vec<u8>,
+) {
+    for k in 0.. {
+        if done() {
+            return;
+        }
+        assert!(k < 800, "probe frames not processed");
+        p.put(next()).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(25)).await;
+    }
+}
+
+/// Stop a node started by [`spawn_node`]; its summary (within 30 s).
+async fn stop(
+    stop_tx: tokio::sync::oneshot::Sender<()>,
+    node: tokio::task::JoinHandle<NodeSummary>,
+) -> NodeSummary {
+    stop_tx.send(()).unwrap();
+    tokio::time::timeout(Duration::from_secs(30), node)
+        .await
+        .unwrap()
+        .unwrap()
+}
+
 fn any_type(name: &str) -> RosType {
     RosType::new(name, "x")
 }
@@ -258,11 +322,7 @@ async fn overload_keeps_newest_counts_drops_and_isolates_a_malformed_stream() {
         "diagnostics with the bad stream",
     )
     .await;
-    stop_tx.send(()).unwrap();
-    let summary: NodeSummary = tokio::time::timeout(Duration::from_secs(30), node)
-        .await
-        .unwrap()
-        .unwrap();
+    let summary = stop(stop_tx, node).await;
     let get = |t: &str| {
         summary
             .streams
@@ -370,27 +430,24 @@ async fn two_shards_split_streams_without_overlap_or_gap() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn tokens_are_declared_and_withdrawn_on_clean_shutdown() {
     let (h, cfg) = harness("tok").await;
-    let seen: Arc<Mutex<Vec<(String, u64)>>> = Arc::default();
-    let backend = Arc::new(TestBackend { seen: seen.clone() });
-    let (stop_tx, node) = spawn_node(cfg, backend);
-    let (_msub, markers) = collect(
-        &h,
-        "/tok/**",
-        &any_type("visualization_msgs/msg/MarkerArray"),
+    let Rig {
+        seen,
+        stop_tx,
+        node,
+        markers,
+        points: p,
+        _markers_sub,
+    } = rig(&h, "tok", cfg).await;
+    let mut i = 0;
+    probe(
+        &p,
+        || seen.lock().unwrap().len() >= 2,
+        || {
+            i += 1;
+            payload(i - 1, 0)
+        },
     )
     .await;
-    let p = h
-        .publisher("/tok/points", &pc2(), Qos::SENSOR_DATA)
-        .await
-        .unwrap();
-    for i in 0.. {
-        if seen.lock().unwrap().len() >= 2 {
-            break;
-        }
-        assert!(i < 800, "frames not processed");
-        p.put(payload(i, 0)).await.unwrap();
-        tokio::time::sleep(Duration::from_millis(25)).await;
-    }
     let tokens = liveliness(&h).await;
     let mine: Vec<&Token> = tokens.iter().filter(|t| t.node == "tok").collect();
     let kinds = |k: EntityKind| mine.iter().filter(|t| t.kind == k).count();
@@ -415,11 +472,7 @@ async fn tokens_are_declared_and_withdrawn_on_clean_shutdown() {
     ] {
         assert!(topics.iter().any(|t| t == want), "{want} in {topics:?}");
     }
-    stop_tx.send(()).unwrap();
-    let summary = tokio::time::timeout(Duration::from_secs(30), node)
-        .await
-        .unwrap()
-        .unwrap();
+    let summary = stop(stop_tx, node).await;
     assert!(summary.clean_shutdown);
     // The final DELETEALL markers were published and all tokens withdrawn.
     wait_for(
@@ -471,29 +524,17 @@ async fn a_busy_stream_is_not_evicted_and_a_silent_one_is() {
     let (h, mut cfg) = harness("evb").await;
     cfg.evict_after_ms = 1000;
     cfg.diagnostics_period_ms = 50;
-    let seen: Arc<Mutex<Vec<(String, u64)>>> = Arc::default();
-    let backend = Arc::new(TestBackend { seen: seen.clone() });
-    let (stop_tx, node) = spawn_node(cfg, backend);
-    let (_msub, markers) = collect(
-        &h,
-        "/evb/**",
-        &any_type("visualization_msgs/msg/MarkerArray"),
-    )
-    .await;
-    let p = h
-        .publisher("/evb/points", &pc2(), Qos::SENSOR_DATA)
-        .await
-        .unwrap();
+    let Rig {
+        seen,
+        stop_tx,
+        node,
+        markers,
+        points: p,
+        _markers_sub,
+    } = rig(&h, "evb", cfg).await;
     let processed = |i: u64| seen.lock().unwrap().iter().any(|(_, k)| *k == i);
     // Probe until the node is subscribed (frame 0).
-    for k in 0.. {
-        if processed(0) {
-            break;
-        }
-        assert!(k < 800, "probe not processed");
-        p.put(payload(0, 0)).await.unwrap();
-        tokio::time::sleep(Duration::from_millis(25)).await;
-    }
+    probe(&p, || processed(0), || payload(0, 0)).await;
     // Frame 1 computes for 2.5 × the eviction time; frame 2 follows as soon
     // as frame 1 is done.
     p.put(payload(1, 2500)).await.unwrap();
@@ -511,11 +552,7 @@ async fn a_busy_stream_is_not_evicted_and_a_silent_one_is() {
         "eviction of the silent stream",
     )
     .await;
-    stop_tx.send(()).unwrap();
-    let summary: NodeSummary = tokio::time::timeout(Duration::from_secs(30), node)
-        .await
-        .unwrap()
-        .unwrap();
+    let summary = stop(stop_tx, node).await;
     assert!(summary.clean_shutdown);
     let s = summary
         .streams
