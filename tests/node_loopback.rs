@@ -430,17 +430,11 @@ async fn two_shards_split_streams_without_overlap_or_gap() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn tokens_are_declared_and_withdrawn_on_clean_shutdown() {
     let (h, cfg) = harness("tok").await;
-    let Rig {
-        seen,
-        stop_tx,
-        node,
-        markers,
-        points: p,
-        _markers_sub,
-    } = rig(&h, "tok", cfg).await;
+    let r = rig(&h, "tok", cfg).await;
+    let (seen, markers, p) = (&r.seen, &r.markers, &r.points);
     let mut i = 0;
     probe(
-        &p,
+        p,
         || seen.lock().unwrap().len() >= 2,
         || {
             i += 1;
@@ -472,7 +466,7 @@ async fn tokens_are_declared_and_withdrawn_on_clean_shutdown() {
     ] {
         assert!(topics.iter().any(|t| t == want), "{want} in {topics:?}");
     }
-    let summary = stop(stop_tx, node).await;
+    let summary = stop(r.stop_tx, r.node).await;
     assert!(summary.clean_shutdown);
     // The final DELETEALL markers were published and all tokens withdrawn.
     wait_for(
@@ -524,17 +518,11 @@ async fn a_busy_stream_is_not_evicted_and_a_silent_one_is() {
     let (h, mut cfg) = harness("evb").await;
     cfg.evict_after_ms = 1000;
     cfg.diagnostics_period_ms = 50;
-    let Rig {
-        seen,
-        stop_tx,
-        node,
-        markers,
-        points: p,
-        _markers_sub,
-    } = rig(&h, "evb", cfg).await;
+    let r = rig(&h, "evb", cfg).await;
+    let (seen, markers, p) = (&r.seen, &r.markers, &r.points);
     let processed = |i: u64| seen.lock().unwrap().iter().any(|(_, k)| *k == i);
     // Probe until the node is subscribed (frame 0).
-    probe(&p, || processed(0), || payload(0, 0)).await;
+    probe(p, || processed(0), || payload(0, 0)).await;
     // Frame 1 computes for 2.5 × the eviction time; frame 2 follows as soon
     // as frame 1 is done.
     p.put(payload(1, 2500)).await.unwrap();
@@ -552,7 +540,7 @@ async fn a_busy_stream_is_not_evicted_and_a_silent_one_is() {
         "eviction of the silent stream",
     )
     .await;
-    let summary = stop(stop_tx, node).await;
+    let summary = stop(r.stop_tx, r.node).await;
     assert!(summary.clean_shutdown);
     let s = summary
         .streams

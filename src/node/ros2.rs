@@ -77,9 +77,9 @@ fn publish_outputs(pubs: &Publishers, topic: &str, outputs: &[Output]) {
     }
 }
 
-/// The publishers' QoS (`node.outputs_keep_all`, as [`NodeConfig::output_qos`]).
+/// The publishers' QoS: [`NodeConfig::output_qos`] as an r2r profile.
 fn output_qos(cfg: &NodeConfig) -> r2r::QosProfile {
-    if cfg.outputs_keep_all {
+    if cfg.output_qos().keep_last.is_none() {
         r2r::QosProfile::default().keep_all()
     } else {
         r2r::QosProfile::default()
@@ -100,10 +100,11 @@ fn drain(s: &Arc<Stream>, pool: &Arc<rayon::ThreadPool>) {
             let mut result = lock(&s.processor).process(&frame);
             let outputs = std::mem::take(&mut result.outputs);
             let _ = s.outputs.send((frame.topic.clone(), outputs));
-            s.slot.touch(now_ns());
+            let now = now_ns();
+            s.slot.touch(now);
             let mut c = lock(&s.counters);
             c.frames += 1;
-            c.latency.push((now_ns() - frame.received_ns) as f64 * 1e-9);
+            c.latency.push((now - frame.received_ns) as f64 * 1e-9);
             if Instant::now() > frame.deadline {
                 c.late += 1;
             }

@@ -285,29 +285,25 @@ fn on_sample(shared: &Shared, r: Received, deadline: Duration) {
     // never see a new stream before its first frame (it would read "silent
     // since the epoch" and close the slot under the frame).
     let mut map = lock(&shared.streams);
-    let stream = {
-        if let Some(s) = map.get(&topic) {
-            s.clone()
-        } else {
-            if map.len() >= shared.cfg.max_streams {
-                shared.ignored.over_capacity.fetch_add(1, Ordering::Relaxed);
-                return;
-            }
-            let s = Arc::new(Stream {
-                slot: Arc::new(LatestSlot::new()),
-                stats: Arc::new(Mutex::new(StreamStats::default())),
-                busy: AtomicBool::new(false),
-            });
-            if shared.new_tx.try_send(topic.clone()).is_err() {
-                shared.ignored.over_capacity.fetch_add(1, Ordering::Relaxed);
-                return;
-            }
-            map.insert(topic.clone(), s.clone());
-            s
-        }
-    };
-    stream.slot.put(frame, r.received_ns);
-    drop(map);
+    if let Some(s) = map.get(&topic) {
+        s.slot.put(frame, r.received_ns);
+        return;
+    }
+    if map.len() >= shared.cfg.max_streams {
+        shared.ignored.over_capacity.fetch_add(1, Ordering::Relaxed);
+        return;
+    }
+    let s = Arc::new(Stream {
+        slot: Arc::new(LatestSlot::new()),
+        stats: Arc::new(Mutex::new(StreamStats::default())),
+        busy: AtomicBool::new(false),
+    });
+    if shared.new_tx.try_send(topic.clone()).is_err() {
+        shared.ignored.over_capacity.fetch_add(1, Ordering::Relaxed);
+        return;
+    }
+    s.slot.put(frame, r.received_ns);
+    map.insert(topic, s);
 }
 
 struct StreamCtx {
@@ -320,13 +316,18 @@ struct StreamCtx {
     stop: watch::Receiver<bool>,
 }
 
-/// What a compute job hands back: the processor, and the frame it took
-/// (receipt time, source stamp, deadline) with its result; `None` when the
-/// slot was empty by the time the job ran.
-type Done = (
-    Box<dyn TopicProcessor>,
-    Option<(i64, Option<i64>, Instant, super::backend::FrameResult)>,
-);
+/// The frame a compute job took (what the stream task needs of it once the
+/// payload is gone) and its result.
+struct Taken {
+    received_ns: i64,
+    source_ns: Option<i64>,
+    deadline: Instant,
+    result: super::backend::FrameResult,
+}
+
+/// What a compute job hands back: the processor, and what it took (`None`
+/// when the slot was empty by the time the job ran).
+type Done = (Box<dyn TopicProcessor>, Option<Taken>);
 
 /// One stream's worker; returns whether it stopped cleanly (no abandoned frame).
 async fn stream_task(mut ctx: StreamCtx) -> bool {
@@ -385,10 +386,13 @@ async fn stream_task(mut ctx: StreamCtx) -> bool {
                 let _enter = span.enter();
                 let result = p.process(&frame);
                 tracing::debug!(objects = result.objects.len(), error = ?result.error, "frame done");
-                let _ = tx.send((
-                    p,
-                    Some((frame.received_ns, frame.source_ns, frame.deadline, result)),
-                ));
+                let taken = Taken {
+                    received_ns: frame.received_ns,
+                    source_ns: frame.source_ns,
+                    deadline: frame.deadline,
+                    result,
+                };
+                let _ = tx.send((p, Some(taken)));
             });
             let stop = ctx.stop.clone();
             let done = tokio::select! {
@@ -401,7 +405,13 @@ async fn stream_task(mut ctx: StreamCtx) -> bool {
                 break;
             };
             processor = Some(p);
-            let Some((received_ns, source_ns, deadline, result)) = taken else {
+            let Some(Taken {
+                received_ns,
+                source_ns,
+                deadline,
+                result,
+            }) = taken
+            else {
                 ctx.stream.busy.store(false, Ordering::Release);
                 continue;
             };
