@@ -19,7 +19,8 @@ Arguments (defaults are those of launch/sepmem.json5):
   node_name     ROS node name
   shard_index   this instance's shard index
   shard_count   number of instances sharing the streams
-  deadline_ms   per-frame deadline in ms from receipt (pipeline.deadline_ms)
+  deadline_ms   warm-frame deadline in ms from receipt (pipeline.deadline_ms)
+  cold_deadline_ms  deadline of a stream's cold frames (pipeline.cold_deadline_ms)
   log           tracing filter (e.g. info, sepmem=debug)
 """
 
@@ -39,6 +40,7 @@ ARGS = {
     "shard_index": "",
     "shard_count": "",
     "deadline_ms": "",
+    "cold_deadline_ms": "",
     "log": "info",
 }
 
@@ -51,6 +53,7 @@ KEYS = {
     "shard_index": "node.shard.index",
     "shard_count": "node.shard.count",
     "deadline_ms": "pipeline.deadline_ms",
+    "cold_deadline_ms": "pipeline.cold_deadline_ms",
 }
 
 

@@ -271,9 +271,14 @@ fn an_expired_deadline_stops_every_frame_before_its_first_iteration() {
     // A deadline that has passed before the membrane starts iterating: every
     // attempt (warm, and the cold fallback) must stop at once and still
     // return a watertight mesh. Independent of the machine's speed.
+    // cold_deadline_ms = 0: cold frames share the (expired) deadline.
     let frames = scored(
         "synth_ellipsoid.mcap",
-        &["pipeline.deadline_ms=0.000001", "pipeline.warm_eta_ratio=0"],
+        &[
+            "pipeline.deadline_ms=0.000001",
+            "pipeline.cold_deadline_ms=0",
+            "pipeline.warm_eta_ratio=0",
+        ],
     );
     assert_eq!(frames.len(), 12);
     for f in &frames {
@@ -287,6 +292,37 @@ fn an_expired_deadline_stops_every_frame_before_its_first_iteration() {
         if r.frame > 0 {
             assert_eq!(r.path, StartPath::Warm);
         }
+    }
+}
+
+#[test]
+fn a_cold_frame_gets_the_cold_deadline_and_warm_frames_the_short_one() {
+    // Warm frames: an expired deadline. The first (cold) frame: an ample one,
+    // so it must iterate, and its result carries over to the warm frames.
+    let frames = scored(
+        "synth_ellipsoid.mcap",
+        &[
+            "pipeline.deadline_ms=0.000001",
+            "pipeline.cold_deadline_ms=60000",
+            "pipeline.warm_eta_ratio=0",
+        ],
+    );
+    assert_eq!(frames.len(), 12);
+    let first = &frames[0].result;
+    assert_eq!(first.path, StartPath::Cold);
+    assert!(
+        first.iterations >= 5,
+        "the cold frame ran only {} iterations under a 60 s budget",
+        first.iterations
+    );
+    for f in &frames[1..] {
+        let r = &f.result;
+        assert_eq!(r.path, StartPath::Warm, "frame {}", r.frame);
+        assert_eq!(r.iterations, 0, "frame {}", r.frame);
+        assert_eq!(
+            r.reconstruction.report.stop,
+            sepmem::membrane::StopReason::Deadline
+        );
     }
 }
 

@@ -148,6 +148,47 @@ fn shared_fits() -> &'static Mutex<HashMap<FitKey, FitSystem>> {
 /// Largest number of factored systems kept by [`shared_fits`].
 const SHARED_FITS_MAX: usize = 64;
 
+/// The factored fit system of an `m × l` grid sampled with `alpha`, from
+/// [`shared_fits`] or factored now and stored there.
+fn shared_fit(
+    cfg: &MembraneConfig,
+    alpha: f64,
+    roughness: f64,
+    m: usize,
+    l: usize,
+) -> Result<FitSystem, MembraneError> {
+    let (un, vn) = sample_counts_alpha(cfg, alpha, m, l);
+    let key = (m, l, un, vn, roughness.to_bits());
+    let cached = shared_fits()
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .get(&key)
+        .cloned();
+    if let Some(s) = cached {
+        return Ok(s);
+    }
+    let sys = FitSystem::new(Layout::samples(m, l, un, vn)?, roughness)?;
+    let mut shared = shared_fits()
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if shared.len() >= SHARED_FITS_MAX {
+        shared.clear();
+    }
+    shared.insert(key, sys.clone());
+    Ok(sys)
+}
+
+/// Factor, once per process, the fit system that a warm start from an
+/// `m × l` surface will use (sampled with `alpha_warm`), so that the first
+/// warm frame after a cold one does not pay for it. The frame pipeline calls
+/// this at the end of a cold frame, whose budget is the longer one.
+///
+/// # Errors
+/// [`MembraneError`] when the grid is invalid or the system is singular.
+pub fn prefactor_warm(cfg: &MembraneConfig, m: usize, l: usize) -> Result<(), MembraneError> {
+    shared_fit(cfg, cfg.alpha_warm, cfg.roughness, m, l).map(|_| ())
+}
+
 /// Cache of factored fit systems, one per control grid (per reconstruction;
 /// filled from [`shared_fits`]).
 struct Fits {
@@ -165,27 +206,7 @@ impl Fits {
         l: usize,
     ) -> Result<&mut FitSystem, MembraneError> {
         if !self.map.contains_key(&(m, l)) {
-            let (un, vn) = sample_counts_alpha(cfg, self.alpha, m, l);
-            let key = (m, l, un, vn, self.roughness.to_bits());
-            let cached = shared_fits()
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner)
-                .get(&key)
-                .cloned();
-            let sys = match cached {
-                Some(s) => s,
-                None => {
-                    let sys = FitSystem::new(Layout::samples(m, l, un, vn)?, self.roughness)?;
-                    let mut shared = shared_fits()
-                        .lock()
-                        .unwrap_or_else(std::sync::PoisonError::into_inner);
-                    if shared.len() >= SHARED_FITS_MAX {
-                        shared.clear();
-                    }
-                    shared.insert(key, sys.clone());
-                    sys
-                }
-            };
+            let sys = shared_fit(cfg, self.alpha, self.roughness, m, l)?;
             self.map.insert((m, l), sys);
         }
         self.map.get_mut(&(m, l)).ok_or(MembraneError::Config {

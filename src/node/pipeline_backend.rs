@@ -96,9 +96,12 @@ impl TopicProcessor for EngineProcessor {
         // never less than a quarter of the configured budget (so that a late
         // frame still gets a few iterations; it is then counted as late).
         let mut pipeline = self.pipeline.clone();
+        // A cold start's longer budget shrinks by the same time already spent.
         if pipeline.deadline_ms > 0.0 {
             let remaining = frame.deadline.saturating_duration_since(Instant::now());
-            pipeline.deadline_ms = (remaining.as_secs_f64() * 1e3).max(0.25 * pipeline.deadline_ms);
+            let left = (remaining.as_secs_f64() * 1e3).max(0.25 * pipeline.deadline_ms);
+            pipeline.cold_deadline_ms = pipeline.cold_budget_ms() - (pipeline.deadline_ms - left);
+            pipeline.deadline_ms = left;
         }
         let mut work: Vec<(Tracker, StreamCloud)> = streams
             .into_iter()

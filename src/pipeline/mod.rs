@@ -56,9 +56,13 @@ pub struct PipelineConfig {
     pub warm_max_iterations: usize,
     /// Iteration cap for a cold frame (0: the membrane's own `max_iterations`).
     pub cold_max_iterations: usize,
-    /// Wall-clock budget per frame in ms, shared by all attempts (0: none);
-    /// the live node measures it from the sample's receipt.
+    /// Wall-clock budget of a warm-started frame in ms (0: no deadline at
+    /// all); the live node measures it from the sample's receipt.
     pub deadline_ms: f64,
+    /// Wall-clock budget in ms of a frame that starts cold (first frame,
+    /// object moved or resized, or a failed warm start), measured like
+    /// `deadline_ms`; never shorter than `deadline_ms` (0: `deadline_ms`).
+    pub cold_deadline_ms: f64,
     /// Cold start when the centroid moved more than this fraction of the object size.
     pub max_motion: f64,
     /// Cold start when the object size changed by more than this fraction.
@@ -87,17 +91,18 @@ impl Default for PipelineConfig {
             label_channel: "label".into(),
             ignore_labels: vec![0],
             min_points: 50,
-            max_points: 5_000,
+            max_points: 2_500,
             warm_start: true,
             warm_max_iterations: 4,
             cold_max_iterations: 0,
-            deadline_ms: 40.0,
+            deadline_ms: 15.0,
+            cold_deadline_ms: 200.0,
             max_motion: 0.5,
             max_size_change: 0.5,
             warm_eta_ratio: 0.8,
             icp_steps: 5,
             icp_trim: 0.1,
-            icp_max_points: 1000,
+            icp_max_points: 300,
             marker_namespace: "sepmem".into(),
             score_samples: 10_000,
             score_visible_radius: 0.02,
@@ -334,8 +339,10 @@ impl Tracker {
             });
         }
         let cloud = &*thinned(cloud, cfg);
-        let deadline =
-            (cfg.deadline_ms > 0.0).then(|| start + Duration::from_secs_f64(cfg.deadline_ms / 1e3));
+        let deadline_after =
+            |ms: f64| (ms > 0.0).then(|| start + Duration::from_secs_f64(ms / 1e3));
+        let deadline = deadline_after(cfg.deadline_ms);
+        let cold_deadline = deadline_after(cfg.cold_budget_ms());
         let centroid = cloud.centroid().unwrap_or_else(Vec3::zeros);
         let size = cloud.aabb().longest_edge();
 
@@ -346,7 +353,10 @@ impl Tracker {
         };
         let budget = Budget {
             max_iterations: Some(cap),
-            deadline,
+            deadline: match path {
+                StartPath::Warm => deadline,
+                StartPath::Cold => cold_deadline,
+            },
         };
         let membrane_err = |source| PipelineError::Membrane {
             stream: self.key.to_string(),
@@ -364,7 +374,7 @@ impl Tracker {
                     self.stats.fallbacks += 1;
                     let budget = Budget {
                         max_iterations: Some(cold_cap(membrane_cfg, cfg)),
-                        deadline,
+                        deadline: cold_deadline,
                     };
                     let cold = membrane::reconstruct(cloud, membrane_cfg, &budget, None)
                         .map_err(membrane_err)?;
@@ -381,6 +391,13 @@ impl Tracker {
             }
         }
 
+        if final_path == StartPath::Cold && cfg.warm_start {
+            let [m, l] = rec.report.grid;
+            // Best effort: a failure here only means the next frame factors it.
+            if let Err(e) = membrane::evolve::prefactor_warm(membrane_cfg, m, l) {
+                tracing::debug!(stream = %self.key, "warm fit not prepared: {e}");
+            }
+        }
         self.previous = Some(Previous {
             surface: rec.surface.clone(),
             vertices: rec.mesh.vertices.clone(),
@@ -460,6 +477,18 @@ impl Tracker {
                 Some(motion),
             ),
             Err(_) => cold(PathReason::FirstFrame),
+        }
+    }
+}
+
+impl PipelineConfig {
+    /// The budget in ms of a cold frame: `cold_deadline_ms`, never below
+    /// `deadline_ms` (0 when frames have no deadline).
+    pub fn cold_budget_ms(&self) -> f64 {
+        if self.deadline_ms > 0.0 {
+            self.cold_deadline_ms.max(self.deadline_ms)
+        } else {
+            0.0
         }
     }
 }
