@@ -116,22 +116,7 @@ impl Density {
             });
         }
         let k = k.min(points.len() - 1);
-        let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
-        let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coords);
-        // k + 1 neighbours include the query point itself (or an exact
-        // duplicate of it) at distance 0, which contributes nothing.
-        let qty = NonZero::new(k + 1).unwrap_or(NonZero::<usize>::MIN);
-        let per_point: Vec<f64> = coords
-            .par_iter()
-            .map(|q| {
-                let sum: f64 = tree
-                    .nearest_n::<SquaredEuclidean>(q, qty)
-                    .iter()
-                    .map(|nn| nn.distance.max(0.0).sqrt())
-                    .sum();
-                sum / k as f64
-            })
-            .collect();
+        let per_point = knn_mean_distances(points, points, k);
         let mean = per_point.iter().sum::<f64>() / per_point.len() as f64;
         let median = median_of(&per_point);
         Ok(Self {
@@ -191,6 +176,29 @@ impl Density {
     }
 }
 
+/// Paper Eq. 5 for the points `queries`, with neighbours taken from
+/// `points` (`k` nearest, a query point present in `points` excluded as
+/// its own neighbour at distance 0). `points` must be finite and hold more
+/// than `k` points; runs in parallel over the queries (rayon).
+pub(crate) fn knn_mean_distances(points: &[Vec3], queries: &[Vec3], k: usize) -> Vec<f64> {
+    let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coords);
+    // k + 1 neighbours include the query point itself (or an exact
+    // duplicate of it) at distance 0, which contributes nothing.
+    let qty = NonZero::new(k + 1).unwrap_or(NonZero::<usize>::MIN);
+    queries
+        .par_iter()
+        .map(|q| {
+            let sum: f64 = tree
+                .nearest_n::<SquaredEuclidean>(&[q.x, q.y, q.z], qty)
+                .iter()
+                .map(|nn| nn.distance.max(0.0).sqrt())
+                .sum();
+            sum / k.max(1) as f64
+        })
+        .collect()
+}
+
 /// Mean of `per_point[i]` over `indices` (ignoring out-of-range ones);
 /// `None` when no index is valid.
 pub(crate) fn local_mean<I>(per_point: &[f64], indices: I) -> Option<f64>
@@ -209,7 +217,7 @@ where
 }
 
 /// Median of a non-empty slice (mean of the middle pair for even lengths); 0 for empty.
-fn median_of(values: &[f64]) -> f64 {
+pub(crate) fn median_of(values: &[f64]) -> f64 {
     if values.is_empty() {
         return 0.0;
     }

@@ -171,6 +171,56 @@ fn sphere_with_outliers_sigma_02() {
 }
 
 #[test]
+fn sampled_density_filters_outliers_and_finds_delta_like_the_exact_one() {
+    // membrane.density_sample (the warm frames' fast prepare): d_i of 256
+    // points only and a voxel-count outlier filter, against the paper's
+    // per-point filter, on a sphere with 5 % uniform outliers around it.
+    let a = Vec3::repeat(0.5);
+    let mut pts = ellipsoid(8_000, a, Vec3::zeros(), 5);
+    let mut rng = ChaCha8Rng::seed_from_u64(6);
+    let outliers = 400;
+    for _ in 0..outliers {
+        pts.push(Vec3::new(
+            rng.random_range(-0.6..0.6),
+            rng.random_range(-0.6..0.6),
+            rng.random_range(-0.6..0.6),
+        ));
+    }
+    let cloud = PointCloud::from_points(pts);
+    let gt = ellipsoid(100_000, a, Vec3::zeros(), 96);
+    let exact = reconstruct(&cloud, &serial(), &Budget::unlimited(), None).unwrap();
+    let sampled_cfg = MembraneConfig {
+        density_sample: 256,
+        ..serial()
+    };
+    let sampled = reconstruct(&cloud, &sampled_cfg, &Budget::unlimited(), None).unwrap();
+    let (re, rs) = (&exact.report, &sampled.report);
+    eprintln!(
+        "exact: delta {:.5} outliers {}; sampled: delta {:.5} outliers {}",
+        re.delta, re.points_outliers, rs.delta, rs.points_outliers
+    );
+    assert!(
+        (rs.delta / re.delta - 1.0).abs() < 0.1,
+        "sampled delta {} vs exact {}",
+        rs.delta,
+        re.delta
+    );
+    // Most of the 400 outliers go, and few surface points with them.
+    assert!(
+        rs.points_outliers >= 300 && rs.points_outliers <= outliers + 160,
+        "sampled filter dropped {} points",
+        rs.points_outliers
+    );
+    check_mesh(&sampled.mesh);
+    let (fe, fs) = (score(&exact.mesh, &gt), score(&sampled.mesh, &gt));
+    eprintln!("F exact {fe:.4} sampled {fs:.4}");
+    assert!(
+        fs >= 0.95 && fs >= fe - 0.02,
+        "F sampled {fs} vs exact {fe}"
+    );
+}
+
+#[test]
 fn warm_start_converges_faster_than_cold() {
     let a = Vec3::new(0.5, 0.4, 0.35);
     let cloud0 = PointCloud::from_points(ellipsoid(6_000, a, Vec3::zeros(), 5));

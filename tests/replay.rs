@@ -63,7 +63,9 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
                 assert!(
                     matches!(
                         r.reason,
-                        PathReason::Tracked | PathReason::WarmFailed { .. }
+                        PathReason::Tracked
+                            | PathReason::WarmFailed { .. }
+                            | PathReason::Drifted { .. }
                     ),
                     "{} frame {}: {}",
                     p.key,
@@ -324,6 +326,26 @@ fn a_cold_frame_gets_the_cold_deadline_and_warm_frames_the_short_one() {
             sepmem::membrane::StopReason::Deadline
         );
     }
+}
+
+#[test]
+fn a_drifted_warm_frame_is_redone_cold_and_says_why() {
+    // warm_eta_ref_ratio = 1: any warm frame below the last cold frame's η_g
+    // is redone cold as "drifted"; 0 (the default) never does that.
+    let count = |frames: &[sepmem::pipeline::score::ScoredFrame]| {
+        frames
+            .iter()
+            .filter(|f| matches!(f.result.reason, PathReason::Drifted { .. }))
+            .inspect(|f| assert_eq!(f.result.path, StartPath::Cold))
+            .count()
+    };
+    let on = scored(
+        "synth_ellipsoid.mcap",
+        &["pipeline.deadline_ms=0", "pipeline.warm_eta_ref_ratio=1"],
+    );
+    let off = scored("synth_ellipsoid.mcap", &["pipeline.deadline_ms=0"]);
+    assert!(count(&on) >= 1, "no frame was redone as drifted");
+    assert_eq!(count(&off), 0);
 }
 
 #[test]

@@ -46,6 +46,9 @@ pub struct MembraneConfig {
     /// Drop points whose d_i exceeds this multiple of the median d_i before
     /// anything else (0 disables the outlier filter).
     pub outlier_factor: f64,
+    /// Compute d_i for at most this many points (a spread subset) and filter
+    /// outliers by voxel counts instead of per-point d_i (0: every point).
+    pub density_sample: usize,
     /// Use the local δ_R (paper Eq. 6) in the search instead of the global median δ.
     pub local_delta: bool,
     /// Axis of the two poles.
@@ -139,6 +142,7 @@ impl Default for MembraneConfig {
             max_points: 8000,
             knn_k: 8,
             outlier_factor: 2.0,
+            density_sample: 0,
             local_delta: false,
             pole_axis: PoleAxis::Shortest,
             init_quantile: 0.002,

@@ -16,7 +16,7 @@ use super::occupancy::OutsideGrid;
 use super::view;
 use super::{Budget, MembraneError, PhaseTimes, Reconstruction, Report, StopReason, WarmStart};
 use crate::cloud::{Aabb, CloudError, PointCloud, Vec3};
-use crate::density::Density;
+use crate::density::{median_of, Density};
 use crate::separability::attribute::{AttributeSet, AttributeWeights, ChannelWeight};
 use crate::separability::grid::SpatialIndex;
 use crate::separability::search::{BestRule, Cuboid, Delta, SearchScratch, Searcher};
@@ -530,6 +530,70 @@ pub fn thin<T>(points: Vec<T>, cap: usize) -> Vec<T> {
     out
 }
 
+/// The points kept by the outlier filter (indices into `finite`) and the
+/// d_i (paper Eq. 5) of every kept point: every point's k-NN distance, and
+/// `d_i ≤ outlier_factor · median` keeps it.
+fn exact_density(
+    finite: &[Vec3],
+    cfg: &MembraneConfig,
+) -> Result<(Vec<usize>, Vec<f64>), MembraneError> {
+    let density = Density::new(finite, cfg.knn_k)?;
+    let d_all = density.per_point();
+    let all = || (0..finite.len()).collect::<Vec<usize>>();
+    let keep: Vec<usize> = if cfg.outlier_factor > 0.0 {
+        let limit = cfg.outlier_factor * density.median();
+        let kept: Vec<usize> = (0..finite.len()).filter(|&k| d_all[k] <= limit).collect();
+        if kept.len() >= MIN_POINTS {
+            kept
+        } else {
+            all()
+        }
+    } else {
+        all()
+    };
+    let d_kept = keep.iter().map(|&k| d_all[k]).collect();
+    Ok((keep, d_kept))
+}
+
+/// `membrane.density_sample`: the k-NN distances of a spread subset of
+/// the points only (δ is their median over the kept ones), and an outlier
+/// filter by voxel counts — a point is kept when the 3×3×3 voxels of edge
+/// ⅔·outlier_factor·δ around it hold more than `knn_k` points. Returns the
+/// kept indices and the d_i of the kept subset points.
+fn sampled_density(
+    finite: &[Vec3],
+    cfg: &MembraneConfig,
+) -> Result<(Vec<usize>, Vec<f64>), MembraneError> {
+    let k = cfg.knn_k.min(finite.len() - 1);
+    if k == 0 {
+        return Err(crate::density::DensityError::ZeroK.into());
+    }
+    let subset = thin((0..finite.len()).collect(), cfg.density_sample);
+    let queries: Vec<Vec3> = subset.iter().map(|&i| finite[i]).collect();
+    let d_sub = crate::density::knn_mean_distances(finite, &queries, k);
+    let delta0 = median_of(&d_sub);
+    let all = || (0..finite.len()).collect::<Vec<usize>>();
+    if !(cfg.outlier_factor > 0.0 && delta0 > 0.0) {
+        return Ok((all(), d_sub));
+    }
+    let index = SpatialIndex::with_cell_size(finite, cfg.outlier_factor * delta0 * 2.0 / 3.0)?;
+    let inlier: Vec<bool> = finite
+        .iter()
+        .map(|p| index.count_around([p.x, p.y, p.z]) > k)
+        .collect();
+    let kept: Vec<usize> = (0..finite.len()).filter(|&i| inlier[i]).collect();
+    if kept.len() < MIN_POINTS {
+        return Ok((all(), d_sub));
+    }
+    let d_kept: Vec<f64> = subset
+        .iter()
+        .zip(&d_sub)
+        .filter(|(&i, _)| inlier[i])
+        .map(|(_, &d)| d)
+        .collect();
+    Ok((kept, if d_kept.is_empty() { d_sub } else { d_kept }))
+}
+
 fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
 }
@@ -570,22 +634,13 @@ pub(crate) fn run(
         }
         .into());
     }
-    let density = Density::new(&finite, cfg.knn_k)?;
-    let d_all = density.per_point();
-    let median_all = density.median();
-    let keep: Vec<usize> = if cfg.outlier_factor > 0.0 {
-        let limit = cfg.outlier_factor * median_all;
-        let kept: Vec<usize> = (0..finite.len()).filter(|&k| d_all[k] <= limit).collect();
-        if kept.len() >= MIN_POINTS {
-            kept
+    let (keep, d_kept) =
+        if cfg.density_sample > 0 && finite.len() > cfg.density_sample && !cfg.local_delta {
+            sampled_density(&finite, cfg)?
         } else {
-            (0..finite.len()).collect()
-        }
-    } else {
-        (0..finite.len()).collect()
-    };
+            exact_density(&finite, cfg)?
+        };
     let points: Vec<Vec3> = keep.iter().map(|&k| finite[k]).collect();
-    let d_used: Vec<f64> = keep.iter().map(|&k| d_all[k]).collect();
     let points_outliers = finite.len() - points.len();
     let bb = Aabb::from_points(&points);
     let e = bb.extent();
@@ -597,10 +652,16 @@ pub(crate) fn run(
         .into());
     }
     let delta = {
-        let mut v = d_used.clone();
+        let mut v = d_kept.clone();
         let mid = v.len() / 2;
         let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
         (*m).max(1e-9 * scale)
+    };
+    // Per-point d_i of the used points (the sampled density knows only δ).
+    let d_used = if d_kept.len() == points.len() {
+        d_kept
+    } else {
+        vec![delta; points.len()]
     };
     // Single views: the viewpoint, its z-buffer, and the mirrored completion
     // of the unseen side (membrane/view.rs).

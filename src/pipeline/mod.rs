@@ -69,12 +69,17 @@ pub struct PipelineConfig {
     pub max_size_change: f64,
     /// Redo a warm frame cold when its η_g is below this fraction of the previous η_g.
     pub warm_eta_ratio: f64,
+    /// Redo a warm frame cold when its η_g is below this fraction of the η_g
+    /// of the stream's last cold frame (0: never).
+    pub warm_eta_ref_ratio: f64,
     /// Rigid ICP steps of the previous surface onto the new points (0: centroid shift only).
     pub icp_steps: usize,
     /// ICP match trimming radius, as a fraction of the object size.
     pub icp_trim: f64,
     /// At most this many new points per ICP step.
     pub icp_max_points: usize,
+    /// `membrane.density_sample` of warm-started frames (0: the membrane's own).
+    pub warm_density_sample: usize,
     /// Marker namespace.
     pub marker_namespace: String,
     /// Samples per mesh queried when replay scores a frame against ground truth.
@@ -100,9 +105,11 @@ impl Default for PipelineConfig {
             max_motion: 0.5,
             max_size_change: 0.5,
             warm_eta_ratio: 0.8,
+            warm_eta_ref_ratio: 0.0,
             icp_steps: 5,
             icp_trim: 0.1,
             icp_max_points: 300,
+            warm_density_sample: 256,
             marker_namespace: "sepmem".into(),
             score_samples: 10_000,
             score_visible_radius: 0.02,
@@ -199,6 +206,15 @@ pub enum PathReason {
         /// η_g of the previous frame.
         previous: f64,
     },
+    /// The warm result's η_g fell below `warm_eta_ref_ratio` × the η_g of
+    /// the stream's last cold frame (slow drift of the carried-over
+    /// surface); redone cold.
+    Drifted {
+        /// η_g of the warm attempt.
+        eta: f64,
+        /// η_g of the last cold frame.
+        reference: f64,
+    },
 }
 
 impl fmt::Display for PathReason {
@@ -210,6 +226,7 @@ impl fmt::Display for PathReason {
             Self::Moved { fraction } => write!(f, "moved({fraction:.2})"),
             Self::Resized { fraction } => write!(f, "resized({fraction:.2})"),
             Self::WarmFailed { eta, previous } => write!(f, "warm_failed({eta:.3}<{previous:.3})"),
+            Self::Drifted { eta, reference } => write!(f, "drifted({eta:.3}<{reference:.3})"),
         }
     }
 }
@@ -257,6 +274,8 @@ struct Previous {
     centroid: Vec3,
     size: f64,
     eta: f64,
+    /// η_g of the stream's last cold frame (the drift reference).
+    eta_ref: f64,
 }
 
 /// Per-stream state: the previous surface for warm starts, and counts.
@@ -362,7 +381,17 @@ impl Tracker {
             stream: self.key.to_string(),
             source,
         };
-        let mut rec = membrane::reconstruct(cloud, membrane_cfg, &budget, warm.as_ref())
+        let warm_cfg;
+        let attempt_cfg = if path == StartPath::Warm && cfg.warm_density_sample > 0 {
+            warm_cfg = MembraneConfig {
+                density_sample: cfg.warm_density_sample,
+                ..membrane_cfg.clone()
+            };
+            &warm_cfg
+        } else {
+            membrane_cfg
+        };
+        let mut rec = membrane::reconstruct(cloud, attempt_cfg, &budget, warm.as_ref())
             .map_err(membrane_err)?;
         let mut iterations = rec.report.iterations;
         let mut final_path = path;
@@ -370,7 +399,9 @@ impl Tracker {
         if path == StartPath::Warm {
             if let Some(prev) = &self.previous {
                 let eta = rec.report.eta_final;
-                if eta < cfg.warm_eta_ratio * prev.eta {
+                let failed = eta < cfg.warm_eta_ratio * prev.eta;
+                let drifted = eta < cfg.warm_eta_ref_ratio * prev.eta_ref;
+                if failed || drifted {
                     self.stats.fallbacks += 1;
                     let budget = Budget {
                         max_iterations: Some(cold_cap(membrane_cfg, cfg)),
@@ -379,9 +410,16 @@ impl Tracker {
                     let cold = membrane::reconstruct(cloud, membrane_cfg, &budget, None)
                         .map_err(membrane_err)?;
                     iterations += cold.report.iterations;
-                    reason = PathReason::WarmFailed {
-                        eta,
-                        previous: prev.eta,
+                    reason = if failed {
+                        PathReason::WarmFailed {
+                            eta,
+                            previous: prev.eta,
+                        }
+                    } else {
+                        PathReason::Drifted {
+                            eta,
+                            reference: prev.eta_ref,
+                        }
                     };
                     final_path = StartPath::Cold;
                     if cold.report.eta_final >= eta {
@@ -398,12 +436,17 @@ impl Tracker {
                 tracing::debug!(stream = %self.key, "warm fit not prepared: {e}");
             }
         }
+        let eta_ref = match (final_path, &self.previous) {
+            (StartPath::Warm, Some(prev)) => prev.eta_ref,
+            _ => rec.report.eta_final,
+        };
         self.previous = Some(Previous {
             surface: rec.surface.clone(),
             vertices: rec.mesh.vertices.clone(),
             centroid,
             size,
             eta: rec.report.eta_final,
+            eta_ref,
         });
         Ok(FrameResult {
             stream: self.key.clone(),

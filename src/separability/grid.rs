@@ -213,6 +213,36 @@ impl SpatialIndex {
         self.dims
     }
 
+    /// Number of indexed points in the 3×3×3 block of cells around the cell
+    /// of `p` (`p`'s own cell included; clipped at the grid's edges). A
+    /// cheap local density: O(27) per call, allocation-free.
+    pub fn count_around(&self, p: [f64; 3]) -> usize {
+        if self.sorted.is_empty() {
+            return 0;
+        }
+        let mut lo = [0usize; 3];
+        let mut hi = [0usize; 3];
+        for j in 0..3 {
+            let a = (p[j] - self.origin[j]) * self.inv_cell;
+            let c = if a > 0.0 {
+                (a as usize).min(self.dims[j] - 1)
+            } else {
+                0
+            };
+            lo[j] = c.saturating_sub(1);
+            hi[j] = (c + 1).min(self.dims[j] - 1);
+        }
+        let (dx, dy) = (self.dims[0], self.dims[1]);
+        let mut n = 0usize;
+        for iz in lo[2]..=hi[2] {
+            for iy in lo[1]..=hi[1] {
+                let row = (iz * dy + iy) * dx;
+                n += (self.cell_start[row + hi[0] + 1] - self.cell_start[row + lo[0]]) as usize;
+            }
+        }
+        n
+    }
+
     /// Call `f(index, [s0, s1, s2], r2)` for every indexed point inside the
     /// (closed) oriented box, where `index` is the point's index in the
     /// original slice, `s_j = (p − centre)·axes[j]` its box coordinates and
@@ -299,6 +329,48 @@ mod tests {
         };
         let a1 = (a - n * n.dot(&a)).normalize();
         [n, a1, n.cross(&a1)]
+    }
+
+    #[test]
+    fn count_around_matches_brute_force_over_the_3x3x3_cells() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let pts: Vec<Vec3> = (0..3000)
+            .map(|_| {
+                Vec3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-0.5..0.5),
+                    rng.random_range(0.0..0.2),
+                )
+            })
+            .collect();
+        let idx = SpatialIndex::with_cell_size(&pts, 0.1).unwrap();
+        let h = idx.cell_size();
+        let min = pts
+            .iter()
+            .fold(Vec3::repeat(f64::INFINITY), |m, p| m.inf(p));
+        let cell = |p: &Vec3| -> [i64; 3] {
+            let d = idx.dims();
+            let q = (p - min) / h;
+            [
+                (q.x.max(0.0) as i64).min(d[0] as i64 - 1),
+                (q.y.max(0.0) as i64).min(d[1] as i64 - 1),
+                (q.z.max(0.0) as i64).min(d[2] as i64 - 1),
+            ]
+        };
+        for q in pts.iter().take(300) {
+            let c = cell(q);
+            let want = pts
+                .iter()
+                .filter(|p| {
+                    let d = cell(p);
+                    (0..3).all(|j| (d[j] - c[j]).abs() <= 1)
+                })
+                .count();
+            assert_eq!(idx.count_around([q.x, q.y, q.z]), want);
+        }
+        // Far outside the grid: clamped to the edge cells, never a panic.
+        let _ = idx.count_around([1e9, -1e9, 0.0]);
+        assert_eq!(SpatialIndex::new(&[]).unwrap().count_around([0.0; 3]), 0);
     }
 
     #[test]
