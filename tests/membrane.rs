@@ -266,6 +266,7 @@ fn iteration_budget_and_deadline_are_respected() {
     let past = Budget {
         max_iterations: None,
         deadline: Some(Instant::now()),
+        min_iterations: 0,
     };
     let rec = reconstruct(&cloud, &cfg, &past, None).unwrap();
     check_mesh(&rec.mesh);

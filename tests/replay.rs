@@ -279,6 +279,7 @@ fn an_expired_deadline_stops_every_frame_before_its_first_iteration() {
         &[
             "pipeline.deadline_ms=0.000001",
             "pipeline.cold_deadline_ms=0",
+            "pipeline.warm_min_iterations=0",
             "pipeline.warm_eta_ratio=0",
         ],
     );
@@ -306,6 +307,7 @@ fn a_cold_frame_gets_the_cold_deadline_and_warm_frames_the_short_one() {
         &[
             "pipeline.deadline_ms=0.000001",
             "pipeline.cold_deadline_ms=60000",
+            "pipeline.warm_min_iterations=0",
             "pipeline.warm_eta_ratio=0",
         ],
     );
@@ -325,6 +327,32 @@ fn a_cold_frame_gets_the_cold_deadline_and_warm_frames_the_short_one() {
             r.reconstruction.report.stop,
             sepmem::membrane::StopReason::Deadline
         );
+    }
+}
+
+#[test]
+fn a_late_warm_frame_still_runs_its_minimum_iterations() {
+    // Warm frames whose deadline has passed run warm_min_iterations (here 2)
+    // and no more; the deadline is what stopped them.
+    let frames = scored(
+        "synth_ellipsoid.mcap",
+        &[
+            "pipeline.deadline_ms=0.000001",
+            "pipeline.cold_deadline_ms=60000",
+            "pipeline.warm_min_iterations=2",
+            "pipeline.warm_eta_ratio=0",
+        ],
+    );
+    assert_eq!(frames.len(), 12);
+    for f in &frames[1..] {
+        let r = &f.result;
+        assert_eq!(r.path, StartPath::Warm, "frame {}", r.frame);
+        assert_eq!(r.iterations, 2, "frame {}", r.frame);
+        assert_eq!(
+            r.reconstruction.report.stop,
+            sepmem::membrane::StopReason::Deadline
+        );
+        assert!(r.reconstruction.mesh.topology().is_watertight());
     }
 }
 

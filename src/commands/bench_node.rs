@@ -113,6 +113,8 @@ fn set_stamp(cdr: &mut [u8], ns: i64) {
 struct Receipts {
     /// (receipt ns, latency ms, stream index)
     meshes: Vec<(i64, f64, usize)>,
+    /// Membrane iterations of each received mesh (receipt ns, iterations).
+    iterations: Vec<(i64, u32)>,
 }
 
 /// Run the benchmark.
@@ -159,8 +161,14 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
                         .and_then(|n| n.parse::<usize>().ok())
                         .unwrap_or(usize::MAX);
                     let lat = (s.received_ns - stamp) as f64 * 1e-6;
+                    let iterations = wire::decode::<SurfaceMesh>(&s.payload)
+                        .map(|m| m.iterations)
+                        .ok();
                     if let Ok(mut r) = r2.lock() {
                         r.meshes.push((s.received_ns, lat, idx));
+                        if let Some(it) = iterations {
+                            r.iterations.push((s.received_ns, it));
+                        }
                     }
                 },
             )
@@ -244,7 +252,19 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
             p.undeclare().await?;
         }
         let summary = node.stop().await?;
-        let r = receipts.lock().map(|r| r.meshes.clone()).unwrap_or_default();
+        let (r, its) = receipts
+            .lock()
+            .map(|r| (r.meshes.clone(), r.iterations.clone()))
+            .unwrap_or_default();
+        // Membrane iterations per mesh after warm-up: how much of the
+        // per-frame budget went into evolving rather than fixed costs.
+        let its: Vec<u32> = its
+            .iter()
+            .filter(|(t, _)| *t >= measure_from)
+            .map(|(_, i)| *i)
+            .collect();
+        let it_mean = its.iter().map(|&i| f64::from(i)).sum::<f64>() / its.len().max(1) as f64;
+        let it_zero = 100.0 * its.iter().filter(|&&i| i == 0).count() as f64 / its.len().max(1) as f64;
         let mut lat: Vec<f64> = r
             .iter()
             .filter(|(t, _, _)| *t >= measure_from)
@@ -293,6 +313,9 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
             lat.last().copied().unwrap_or(f64::NAN)
         );
         println!(
+            "membrane iterations per mesh (after warm-up): mean {it_mean:.2}, none {it_zero:.1} %"
+        );
+        println!(
             "resident memory MiB: start {:.1}, after first period {rss_first:.1}, end {rss_last:.1}, max {rss_max:.1}",
             rss[0].1
         );
@@ -304,6 +327,7 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
                 "published": published, "received": received, "processed": frames,
                 "drops": drops, "late": late, "meshes": r.len(),
                 "latency_ms": {"p50": p50, "p95": p95, "p99": p99, "n": lat.len()},
+                "iterations_per_mesh": {"mean": it_mean, "none_percent": it_zero},
                 "rss_mib": rss.iter().map(|(t, m)| serde_json::json!([t, m])).collect::<Vec<_>>(),
                 "clean_shutdown": summary.clean_shutdown,
             });

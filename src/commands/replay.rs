@@ -262,6 +262,7 @@ pub fn run_opts(
                         let budget = Budget {
                             max_iterations: Some(cold_cap(&cfg.membrane, p)),
                             deadline: None,
+                            min_iterations: 0,
                         };
                         let cold = membrane::reconstruct(
                             &thinned(&sc.cloud, p),

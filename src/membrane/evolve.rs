@@ -797,7 +797,7 @@ pub(crate) fn run(
         if budget.max_iterations.is_some_and(|n| it >= n) {
             break StopReason::IterationBudget;
         }
-        if let Some(dl) = budget.deadline {
+        if let Some(dl) = budget.deadline.filter(|_| it >= budget.min_iterations) {
             // Predict this iteration's time from the last one, scaled by the
             // sample count when the grid grew since.
             let (un, vn) = sample_counts_alpha(cfg, fits.alpha, surface.m(), surface.l());

@@ -81,6 +81,9 @@ pub struct Budget {
     pub max_iterations: Option<usize>,
     /// Stop starting iterations that would end after this instant.
     pub deadline: Option<Instant>,
+    /// Run at least this many iterations even past the deadline (the
+    /// iteration caps still apply). Default 0.
+    pub min_iterations: usize,
 }
 
 impl Budget {
@@ -94,6 +97,7 @@ impl Budget {
         Self {
             max_iterations: Some(n),
             deadline: None,
+            min_iterations: 0,
         }
     }
 
@@ -102,6 +106,7 @@ impl Budget {
         Self {
             max_iterations: None,
             deadline: Some(Instant::now() + d),
+            min_iterations: 0,
         }
     }
 }

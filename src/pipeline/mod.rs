@@ -54,6 +54,8 @@ pub struct PipelineConfig {
     pub warm_start: bool,
     /// Iteration cap for a warm-started frame.
     pub warm_max_iterations: usize,
+    /// Iterations a warm-started frame runs even past its deadline.
+    pub warm_min_iterations: usize,
     /// Iteration cap for a cold frame (0: the membrane's own `max_iterations`).
     pub cold_max_iterations: usize,
     /// Wall-clock budget of a warm-started frame in ms (0: no deadline at
@@ -99,6 +101,7 @@ impl Default for PipelineConfig {
             max_points: 2_500,
             warm_start: true,
             warm_max_iterations: 4,
+            warm_min_iterations: 1,
             cold_max_iterations: 0,
             deadline_ms: 15.0,
             cold_deadline_ms: 200.0,
@@ -376,6 +379,10 @@ impl Tracker {
                 StartPath::Warm => deadline,
                 StartPath::Cold => cold_deadline,
             },
+            min_iterations: match path {
+                StartPath::Warm => cfg.warm_min_iterations.min(cap),
+                StartPath::Cold => 0,
+            },
         };
         let membrane_err = |source| PipelineError::Membrane {
             stream: self.key.to_string(),
@@ -406,6 +413,7 @@ impl Tracker {
                     let budget = Budget {
                         max_iterations: Some(cold_cap(membrane_cfg, cfg)),
                         deadline: cold_deadline,
+                        min_iterations: 0,
                     };
                     let cold = membrane::reconstruct(cloud, membrane_cfg, &budget, None)
                         .map_err(membrane_err)?;

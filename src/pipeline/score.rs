@@ -366,6 +366,7 @@ pub fn replay_scored(
                 let budget = crate::membrane::Budget {
                     max_iterations: Some(super::cold_cap(&cfg.membrane, &cfg.pipeline)),
                     deadline: None,
+                    min_iterations: 0,
                 };
                 let rec = crate::membrane::reconstruct(
                     &super::thinned(&s.cloud, &cfg.pipeline),
