@@ -298,20 +298,40 @@ fn an_expired_deadline_stops_every_frame_before_its_first_iteration() {
     }
 }
 
-#[test]
-fn a_cold_frame_gets_the_cold_deadline_and_warm_frames_the_short_one() {
-    // Warm frames: an expired deadline. The first (cold) frame: an ample one,
-    // so it must iterate, and its result carries over to the warm frames.
+/// Replays the synth ellipsoid with an expired deadline for warm frames and
+/// an ample one (60 s) for cold ones, and checks that every later frame was
+/// warm, ran exactly `min_iterations` (pipeline.warm_min_iterations) and was
+/// stopped by the deadline. Returns the frames.
+fn late_warm_frames(min_iterations: usize) -> Vec<sepmem::pipeline::score::ScoredFrame> {
+    let min = format!("pipeline.warm_min_iterations={min_iterations}");
     let frames = scored(
         "synth_ellipsoid.mcap",
         &[
             "pipeline.deadline_ms=0.000001",
             "pipeline.cold_deadline_ms=60000",
-            "pipeline.warm_min_iterations=0",
+            &min,
             "pipeline.warm_eta_ratio=0",
         ],
     );
     assert_eq!(frames.len(), 12);
+    for f in &frames[1..] {
+        let r = &f.result;
+        assert_eq!(r.path, StartPath::Warm, "frame {}", r.frame);
+        assert_eq!(r.iterations, min_iterations, "frame {}", r.frame);
+        assert_eq!(
+            r.reconstruction.report.stop,
+            sepmem::membrane::StopReason::Deadline
+        );
+        assert!(r.reconstruction.mesh.topology().is_watertight());
+    }
+    frames
+}
+
+#[test]
+fn a_cold_frame_gets_the_cold_deadline_and_warm_frames_the_short_one() {
+    // The first (cold) frame has an ample budget, so it must iterate, and
+    // its result carries over to the warm frames, which stop at once.
+    let frames = late_warm_frames(0);
     let first = &frames[0].result;
     assert_eq!(first.path, StartPath::Cold);
     assert!(
@@ -319,41 +339,12 @@ fn a_cold_frame_gets_the_cold_deadline_and_warm_frames_the_short_one() {
         "the cold frame ran only {} iterations under a 60 s budget",
         first.iterations
     );
-    for f in &frames[1..] {
-        let r = &f.result;
-        assert_eq!(r.path, StartPath::Warm, "frame {}", r.frame);
-        assert_eq!(r.iterations, 0, "frame {}", r.frame);
-        assert_eq!(
-            r.reconstruction.report.stop,
-            sepmem::membrane::StopReason::Deadline
-        );
-    }
 }
 
 #[test]
 fn a_late_warm_frame_still_runs_its_minimum_iterations() {
-    // Warm frames whose deadline has passed run warm_min_iterations (here 2)
-    // and no more; the deadline is what stopped them.
-    let frames = scored(
-        "synth_ellipsoid.mcap",
-        &[
-            "pipeline.deadline_ms=0.000001",
-            "pipeline.cold_deadline_ms=60000",
-            "pipeline.warm_min_iterations=2",
-            "pipeline.warm_eta_ratio=0",
-        ],
-    );
-    assert_eq!(frames.len(), 12);
-    for f in &frames[1..] {
-        let r = &f.result;
-        assert_eq!(r.path, StartPath::Warm, "frame {}", r.frame);
-        assert_eq!(r.iterations, 2, "frame {}", r.frame);
-        assert_eq!(
-            r.reconstruction.report.stop,
-            sepmem::membrane::StopReason::Deadline
-        );
-        assert!(r.reconstruction.mesh.topology().is_watertight());
-    }
+    // Past their deadline, warm frames run warm_min_iterations and no more.
+    late_warm_frames(2);
 }
 
 #[test]
