@@ -148,6 +148,12 @@ fn shared_fits() -> &'static Mutex<HashMap<FitKey, FitSystem>> {
 /// Largest number of factored systems kept by [`shared_fits`].
 const SHARED_FITS_MAX: usize = 64;
 
+/// The [`shared_fits`] key of an `m × l` grid sampled with `alpha`.
+fn fit_key(cfg: &MembraneConfig, alpha: f64, roughness: f64, m: usize, l: usize) -> FitKey {
+    let (un, vn) = sample_counts_alpha(cfg, alpha, m, l);
+    (m, l, un, vn, roughness.to_bits())
+}
+
 /// The factored fit system of an `m × l` grid sampled with `alpha`, from
 /// [`shared_fits`] or factored now and stored there.
 fn shared_fit(
@@ -157,8 +163,7 @@ fn shared_fit(
     m: usize,
     l: usize,
 ) -> Result<FitSystem, MembraneError> {
-    let (un, vn) = sample_counts_alpha(cfg, alpha, m, l);
-    let key = (m, l, un, vn, roughness.to_bits());
+    let key = fit_key(cfg, alpha, roughness, m, l);
     let cached = shared_fits()
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
@@ -167,7 +172,7 @@ fn shared_fit(
     if let Some(s) = cached {
         return Ok(s);
     }
-    let sys = FitSystem::new(Layout::samples(m, l, un, vn)?, roughness)?;
+    let sys = FitSystem::new(Layout::samples(m, l, key.2, key.3)?, roughness)?;
     let mut shared = shared_fits()
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner);
@@ -186,6 +191,14 @@ fn shared_fit(
 /// # Errors
 /// [`MembraneError`] when the grid is invalid or the system is singular.
 pub fn prefactor_warm(cfg: &MembraneConfig, m: usize, l: usize) -> Result<(), MembraneError> {
+    let key = fit_key(cfg, cfg.alpha_warm, cfg.roughness, m, l);
+    let cached = shared_fits()
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .contains_key(&key);
+    if cached {
+        return Ok(());
+    }
     shared_fit(cfg, cfg.alpha_warm, cfg.roughness, m, l).map(|_| ())
 }
 
@@ -539,20 +552,24 @@ fn exact_density(
 ) -> Result<(Vec<usize>, Vec<f64>), MembraneError> {
     let density = Density::new(finite, cfg.knn_k)?;
     let d_all = density.per_point();
-    let all = || (0..finite.len()).collect::<Vec<usize>>();
-    let keep: Vec<usize> = if cfg.outlier_factor > 0.0 {
-        let limit = cfg.outlier_factor * density.median();
-        let kept: Vec<usize> = (0..finite.len()).filter(|&k| d_all[k] <= limit).collect();
-        if kept.len() >= MIN_POINTS {
-            kept
-        } else {
-            all()
-        }
-    } else {
-        all()
-    };
+    let limit = cfg.outlier_factor * density.median();
+    let keep = kept_or_all(finite.len(), cfg.outlier_factor > 0.0, |k| {
+        d_all[k] <= limit
+    });
     let d_kept = keep.iter().map(|&k| d_all[k]).collect();
     Ok((keep, d_kept))
+}
+
+/// The indices `0..n` that pass `keep` when `filter` is on, or all of them
+/// when it is off or fewer than [`MIN_POINTS`] would remain.
+fn kept_or_all(n: usize, filter: bool, keep: impl Fn(usize) -> bool) -> Vec<usize> {
+    if filter {
+        let kept: Vec<usize> = (0..n).filter(|&i| keep(i)).collect();
+        if kept.len() >= MIN_POINTS {
+            return kept;
+        }
+    }
+    (0..n).collect()
 }
 
 /// `membrane.density_sample`: the k-NN distances of a spread subset of
@@ -572,18 +589,17 @@ fn sampled_density(
     let queries: Vec<Vec3> = subset.iter().map(|&i| finite[i]).collect();
     let d_sub = crate::density::knn_mean_distances(finite, &queries, k);
     let delta0 = median_of(&d_sub);
-    let all = || (0..finite.len()).collect::<Vec<usize>>();
     if !(cfg.outlier_factor > 0.0 && delta0 > 0.0) {
-        return Ok((all(), d_sub));
+        return Ok(((0..finite.len()).collect(), d_sub));
     }
     let index = SpatialIndex::with_cell_size(finite, cfg.outlier_factor * delta0 * 2.0 / 3.0)?;
     let inlier: Vec<bool> = finite
         .iter()
         .map(|p| index.count_around([p.x, p.y, p.z]) > k)
         .collect();
-    let kept: Vec<usize> = (0..finite.len()).filter(|&i| inlier[i]).collect();
-    if kept.len() < MIN_POINTS {
-        return Ok((all(), d_sub));
+    let kept = kept_or_all(finite.len(), true, |i| inlier[i]);
+    if kept.len() == finite.len() {
+        return Ok((kept, d_sub));
     }
     let d_kept: Vec<f64> = subset
         .iter()
