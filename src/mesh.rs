@@ -75,6 +75,28 @@ impl TriMesh {
             .sum()
     }
 
+    /// Area-weighted unit vertex normals (outward for a counter-clockwise
+    /// mesh); zero for a vertex no non-degenerate triangle uses.
+    pub fn vertex_normals(&self) -> Vec<Vec3> {
+        let mut n = vec![Vec3::zeros(); self.vertices.len()];
+        for t in &self.triangles {
+            let [a, b, c] = t.map(|i| i as usize);
+            if a.max(b).max(c) >= self.vertices.len() {
+                continue;
+            }
+            let f =
+                (self.vertices[b] - self.vertices[a]).cross(&(self.vertices[c] - self.vertices[a]));
+            n[a] += f;
+            n[b] += f;
+            n[c] += f;
+        }
+        for v in &mut n {
+            let l = v.norm();
+            *v = if l > 0.0 { *v / l } else { Vec3::zeros() };
+        }
+        n
+    }
+
     /// Total surface area.
     pub fn area(&self) -> f64 {
         (0..self.triangles.len())

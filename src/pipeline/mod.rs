@@ -9,7 +9,7 @@
 //!    configured bounds, **cold** (the paper's six-extreme-point octagon,
 //!    §III-E) otherwise;
 //! 3. for a warm start, compensates the motion: centroid shift, then a few
-//!    rigid ICP steps of the previous surface onto the new points
+//!    rigid point-to-plane ICP steps of the previous surface onto the new points
 //!    ([`align`]);
 //! 4. evolves the membrane (paper §III-D/E steps 2–5) under the frame's
 //!    budget: an iteration cap (small for warm frames) and a wall-clock
@@ -274,6 +274,8 @@ pub struct StreamStats {
 struct Previous {
     surface: ClosedSurface,
     vertices: Vec<Vec3>,
+    /// Unit vertex normals of `vertices` (point-to-plane alignment).
+    normals: Vec<Vec3>,
     centroid: Vec3,
     size: f64,
     eta: f64,
@@ -451,6 +453,7 @@ impl Tracker {
         self.previous = Some(Previous {
             surface: rec.surface.clone(),
             vertices: rec.mesh.vertices.clone(),
+            normals: rec.mesh.vertex_normals(),
             centroid,
             size,
             eta: rec.report.eta_final,
@@ -504,6 +507,7 @@ impl Tracker {
         let motion = if cfg.icp_steps > 0 {
             align::align(
                 &prev.vertices,
+                Some(&prev.normals),
                 &cloud.points,
                 shift,
                 cfg.icp_steps,
