@@ -29,6 +29,7 @@ pub mod score;
 
 use crate::cloud::{PointCloud, Vec3};
 use crate::membrane::{self, Budget, MembraneConfig, MembraneError, Reconstruction, WarmStart};
+use crate::mesh::TriMesh;
 use crate::spline::ClosedSurface;
 use serde::{Deserialize, Serialize};
 use std::borrow::Cow;
@@ -107,10 +108,10 @@ impl Default for PipelineConfig {
             cold_deadline_ms: 200.0,
             max_motion: 0.5,
             max_size_change: 0.5,
-            warm_eta_ratio: 0.8,
+            warm_eta_ratio: 0.6,
             warm_eta_ref_ratio: 0.0,
             icp_steps: 5,
-            icp_trim: 0.1,
+            icp_trim: 0.03,
             icp_max_points: 300,
             warm_density_sample: 256,
             marker_namespace: "sepmem".into(),
@@ -283,6 +284,29 @@ struct Previous {
     eta_ref: f64,
 }
 
+/// The vertices (and unit normals) the next frame aligns onto: those where
+/// the membrane found a boundary (separability > 0), i.e. that lay on data.
+/// A single view's back, held where the camera never looked, is left out,
+/// so new points near the silhouette cannot match it. All vertices when
+/// fewer than [`MIN_ALIGN_VERTICES`] lay on data.
+fn alignment_model(mesh: &TriMesh) -> (Vec<Vec3>, Vec<Vec3>) {
+    let normals = mesh.vertex_normals();
+    let on_data = mesh.scalar(membrane::SEPARABILITY_CHANNEL).map(|eta| {
+        eta.iter()
+            .zip(mesh.vertices.iter().zip(&normals))
+            .filter(|(e, _)| **e > 0.0)
+            .map(|(_, (v, n))| (*v, *n))
+            .unzip::<_, _, Vec<Vec3>, Vec<Vec3>>()
+    });
+    match on_data {
+        Some(vn) if vn.0.len() >= MIN_ALIGN_VERTICES => vn,
+        _ => (mesh.vertices.clone(), normals),
+    }
+}
+
+/// Fewest on-data vertices for [`alignment_model`] to use them alone.
+const MIN_ALIGN_VERTICES: usize = 50;
+
 /// Per-stream state: the previous surface for warm starts, and counts.
 #[derive(Debug, Clone)]
 pub struct Tracker {
@@ -450,10 +474,11 @@ impl Tracker {
             (StartPath::Warm, Some(prev)) => prev.eta_ref,
             _ => rec.report.eta_final,
         };
+        let (vertices, normals) = alignment_model(&rec.mesh);
         self.previous = Some(Previous {
             surface: rec.surface.clone(),
-            vertices: rec.mesh.vertices.clone(),
-            normals: rec.mesh.vertex_normals(),
+            vertices,
+            normals,
             centroid,
             size,
             eta: rec.report.eta_final,
@@ -579,6 +604,50 @@ pub fn cold_cap(membrane: &MembraneConfig, cfg: &PipelineConfig) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn alignment_uses_the_vertices_on_data_with_outward_normals() {
+        let lay = crate::spline::Layout::samples(8, 5, 24, 24).expect("layout");
+        let mut fit = crate::spline::FitSystem::new(lay, 1e-2).expect("fit");
+        let pts: Vec<Vec3> = (0..2000)
+            .map(|k| {
+                let (a, b) = (k as f64 * 0.618_034, k as f64 * 0.414_214);
+                let (th, ph) = (
+                    (a.fract() * 2.0 - 1.0).acos(),
+                    b.fract() * std::f64::consts::TAU,
+                );
+                Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos())
+            })
+            .collect();
+        let surface =
+            membrane::init::octagon(&pts, membrane::config::PoleAxis::Z, 0.0, 1.0, &mut fit)
+                .expect("octagon");
+        // Separability > 0 on the +x half only (a single view's front).
+        let mut mesh = membrane::extract_mesh(&surface, fit.layout(), &[]);
+        let eta: Vec<f32> = mesh
+            .vertices
+            .iter()
+            .map(|v| if v.x > 0.0 { 0.5 } else { 0.0 })
+            .collect();
+        mesh.vertex_scalars = vec![(membrane::SEPARABILITY_CHANNEL.to_string(), eta)];
+        let (v, n) = alignment_model(&mesh);
+        let front = mesh.vertices.iter().filter(|v| v.x > 0.0).count();
+        assert!(front >= MIN_ALIGN_VERTICES && front < mesh.vertices.len());
+        assert_eq!(v.len(), front);
+        assert!(v.iter().all(|p| p.x > 0.0));
+        assert_eq!(n.len(), v.len());
+        // Outward unit normals: they point away from the centre.
+        assert!(v
+            .iter()
+            .zip(&n)
+            .all(|(p, n)| (n.norm() - 1.0).abs() < 1e-9 && n.dot(p) > 0.0));
+        // Too few vertices on data: every vertex is used.
+        let sparse: Vec<f32> = (0..mesh.vertices.len())
+            .map(|i| if i < 10 { 1.0 } else { 0.0 })
+            .collect();
+        mesh.vertex_scalars = vec![(membrane::SEPARABILITY_CHANNEL.to_string(), sparse)];
+        assert_eq!(alignment_model(&mesh).0.len(), mesh.vertices.len());
+    }
 
     #[test]
     fn thinning_keeps_about_max_points_spread_over_the_whole_cloud() {
