@@ -150,6 +150,9 @@ fn point_to_plane(model: &[Vec3], normals: &[Vec3], planar: &[(usize, Vec3)]) ->
         a[(k, k)] += reg;
     }
     let x = a.cholesky()?.solve(&b);
+    if !x.iter().all(|v| v.is_finite()) {
+        return None;
+    }
     let rot = UnitQuaternion::from_scaled_axis(Vec3::new(x[0], x[1], x[2]));
     // p ↦ R (p − centre) + centre + t.
     let t = centre - rot * centre + Vec3::new(x[3], x[4], x[5]);
