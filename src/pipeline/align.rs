@@ -71,14 +71,11 @@ pub fn align(
     let normals = normals.filter(|n| n.len() == model.len());
     let stride = (data.len() / max_points.max(1)).max(1);
     let trim2 = trim * trim;
-    let mut pairs: Vec<(Vec3, Vec3)> = Vec::with_capacity(data.len() / stride + 1);
-    // Point-to-plane: (model vertex index, data point in the model frame).
-    let mut planar: Vec<(usize, Vec3)> = Vec::with_capacity(data.len() / stride + 1);
+    let mut matches: Vec<Match> = Vec::with_capacity(data.len() / stride + 1);
     for step in 0..=steps {
         // Match in the model's frame: bring data back by the inverse motion.
         let inv = motion.inverse();
-        pairs.clear();
-        planar.clear();
+        matches.clear();
         let mut sum2 = 0.0;
         let mut sampled = 0usize;
         for q in data.iter().step_by(stride) {
@@ -87,24 +84,27 @@ pub fn align(
             let nn = tree.nearest_one::<SquaredEuclidean>(&[ql.x, ql.y, ql.z]);
             if nn.distance <= trim2 {
                 sum2 += nn.distance;
-                pairs.push((model[nn.item as usize], *q));
-                planar.push((nn.item as usize, ql));
+                matches.push(Match {
+                    vertex: nn.item as usize,
+                    local: ql,
+                    data: *q,
+                });
             }
         }
         out.motion = motion;
         out.steps = step;
-        out.inlier_fraction = pairs.len() as f64 / sampled.max(1) as f64;
-        out.rms = if pairs.is_empty() {
+        out.inlier_fraction = matches.len() as f64 / sampled.max(1) as f64;
+        out.rms = if matches.is_empty() {
             f64::INFINITY
         } else {
-            (sum2 / pairs.len() as f64).sqrt()
+            (sum2 / matches.len() as f64).sqrt()
         };
-        if step == steps || pairs.len() < 3 {
+        if step == steps || matches.len() < 3 {
             break;
         }
         let next = match normals {
-            Some(n) => point_to_plane(model, n, &planar).map(|delta| (delta * inv).inverse()),
-            None => kabsch(&pairs),
+            Some(n) => point_to_plane(model, n, &matches).map(|delta| (delta * inv).inverse()),
+            None => kabsch(model, &matches),
         };
         match next {
             Some(m) => motion = m,
@@ -114,21 +114,37 @@ pub fn align(
     out
 }
 
+/// A new point matched to its nearest model vertex.
+#[derive(Debug, Clone, Copy)]
+struct Match {
+    /// Index of the model vertex.
+    vertex: usize,
+    /// The point in the model's frame (under the current motion's inverse).
+    local: Vec3,
+    /// The point as measured.
+    data: Vec3,
+}
+
 /// The small rigid motion `δ` (of the data, in the model's frame) that
 /// minimises `Σ (n_i·(δ q_i − m_i))²` over the matches `(i, q_i)`, from the
 /// linearisation `δ q ≈ q + ω × (q − c) + t` about the matches' centroid
 /// `c`; `None` when the system is singular.
-fn point_to_plane(model: &[Vec3], normals: &[Vec3], planar: &[(usize, Vec3)]) -> Option<Rigid> {
-    if planar.is_empty() {
+fn point_to_plane(model: &[Vec3], normals: &[Vec3], matches: &[Match]) -> Option<Rigid> {
+    if matches.is_empty() {
         return None;
     }
     // Rotate about the matches' centroid: far from the origin a rotation
     // about it would be nearly a translation (a poorly conditioned system).
-    let centre = planar.iter().map(|(_, q)| q).sum::<Vec3>() / planar.len() as f64;
+    let centre = matches.iter().map(|m| m.local).sum::<Vec3>() / matches.len() as f64;
     let mut a = Matrix6::<f64>::zeros();
     let mut b = Vector6::<f64>::zeros();
     let mut used = 0usize;
-    for &(i, q) in planar {
+    for &Match {
+        vertex: i,
+        local: q,
+        ..
+    } in matches
+    {
         let n = normals[i];
         if n.norm_squared() == 0.0 {
             continue;
@@ -159,18 +175,19 @@ fn point_to_plane(model: &[Vec3], normals: &[Vec3], planar: &[(usize, Vec3)]) ->
     Some(Rigid::from_parts(Translation3::from(t), rot))
 }
 
-/// Best rigid motion mapping the first of each pair onto the second.
-fn kabsch(pairs: &[(Vec3, Vec3)]) -> Option<Rigid> {
-    let n = pairs.len() as f64;
+/// Best rigid motion mapping each match's model vertex onto its point.
+fn kabsch(model: &[Vec3], matches: &[Match]) -> Option<Rigid> {
+    let pairs = || matches.iter().map(|m| (model[m.vertex], m.data));
+    let n = matches.len() as f64;
     let (mut ca, mut cb) = (Vec3::zeros(), Vec3::zeros());
-    for (a, b) in pairs {
+    for (a, b) in pairs() {
         ca += a;
         cb += b;
     }
     ca /= n;
     cb /= n;
     let mut h = Matrix3::zeros();
-    for (a, b) in pairs {
+    for (a, b) in pairs() {
         h += (a - ca) * (b - cb).transpose();
     }
     let svd = h.svd(true, true);
