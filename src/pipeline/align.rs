@@ -221,16 +221,20 @@ mod tests {
             .collect()
     }
 
+    /// A partial view: only the +x half of `n` object points, moved by `truth`.
+    fn partial_view(n: usize, seed: u64, truth: &Rigid) -> Vec<Vec3> {
+        sphere_points(n, seed)
+            .into_iter()
+            .filter(|p| p.x > 0.0)
+            .map(|p| truth.transform_point(&p.into()).coords)
+            .collect()
+    }
+
     #[test]
     fn recovers_a_small_rigid_motion_from_a_partial_view() {
         let model = sphere_points(4000, 1);
         let truth = Rigid::new(Vec3::new(0.05, -0.03, 0.02), Vec3::new(0.0, 0.0, 0.12));
-        // Partial view: only the +x half of the moved object is seen.
-        let data: Vec<Vec3> = sphere_points(3000, 2)
-            .into_iter()
-            .filter(|p| p.x > 0.0)
-            .map(|p| truth.transform_point(&p.into()).coords)
-            .collect();
+        let data = partial_view(3000, 2, &truth);
         let a = align(&model, None, &data, Rigid::identity(), 30, 0.2, 2000);
         // Point-to-point ICP onto a discrete vertex set (spacing ~0.045 here)
         // leaves a residual of the order of the spacing; it must still remove
@@ -265,11 +269,7 @@ mod tests {
         let model = sphere_points(1200, 3);
         let normals = ellipsoid_normals(&model);
         let truth = Rigid::new(Vec3::new(0.02, -0.01, 0.015), Vec3::new(0.02, 0.05, 0.03));
-        let data: Vec<Vec3> = sphere_points(6000, 4)
-            .into_iter()
-            .filter(|p| p.x > 0.0)
-            .map(|p| truth.transform_point(&p.into()).coords)
-            .collect();
+        let data = partial_view(6000, 4, &truth);
         let angle_error = |m: &Rigid| (m.rotation.inverse() * truth.rotation).angle();
         let init = Rigid::identity();
         let plane = align(&model, Some(&normals), &data, init, 5, 0.2, 300);
