@@ -237,6 +237,7 @@ fn warm_start_converges_faster_than_cold() {
         &Budget::unlimited(),
         Some(&WarmStart {
             surface: first.surface.clone(),
+            phase: 0,
         }),
     )
     .unwrap();

@@ -66,6 +66,7 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
                         PathReason::Tracked
                             | PathReason::WarmFailed { .. }
                             | PathReason::Drifted { .. }
+                            | PathReason::WarmKept { .. }
                     ),
                     "{} frame {}: {}",
                     p.key,

@@ -101,6 +101,9 @@ pub struct MembraneConfig {
     pub significance: f64,
     /// 3×3 median filter of the per-sample shifts.
     pub median_filter: bool,
+    /// Warm-started iterations search a checkerboard half of the samples
+    /// (alternating) and give the other half their neighbours' result.
+    pub sparse_warm_search: bool,
     /// Gated inward force where the occupancy grid says the sample is outside.
     pub inward_force: bool,
     /// Voxel edge of the occupancy grid, in multiples of δ.
@@ -168,6 +171,7 @@ impl Default for MembraneConfig {
             inside_denser: true,
             significance: 0.3,
             median_filter: true,
+            sparse_warm_search: true,
             inward_force: true,
             inward_voxel_delta: 2.0,
             inward_min_points: 20,

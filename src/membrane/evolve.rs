@@ -376,13 +376,17 @@ impl Stepper<'_> {
             .is_some_and(|grid| view::outside_at(grid, self.view, p))
     }
 
-    /// Search every sample of `layout` (in parallel, coarse row chunks).
+    /// Search every sample of `layout` (in parallel, coarse row chunks) into
+    /// `outs`; with `skip = Some(p)` only those with `i + j + p` even, the
+    /// others are only evaluated and marked [`SKIPPED`].
+    #[allow(clippy::too_many_arguments)]
     fn search_all(
         &self,
         surface: &ClosedSurface,
         layout: &Layout,
         depth: f64,
         allow_inward: bool,
+        skip: Option<usize>,
         outs: &mut Vec<SampleOut>,
         scratches: &mut [ThreadScratch],
     ) {
@@ -398,9 +402,82 @@ impl Stepper<'_> {
                 for (k, o) in chunk.iter_mut().enumerate() {
                     let j = c * rows_per + k / un;
                     let i = k % un;
-                    *o = self.sample(surface, layout, i, j, depth, allow_inward, scratch);
+                    *o = if skip.is_some_and(|p| (i + j + p) % 2 == 1) {
+                        let sp = surface.eval_at(layout, i, j);
+                        SampleOut {
+                            p: sp.p,
+                            n: surface.normal(&sp),
+                            state: SKIPPED,
+                            ..SampleOut::default()
+                        }
+                    } else {
+                        self.sample(surface, layout, i, j, depth, allow_inward, scratch)
+                    };
                 }
             });
+    }
+}
+
+/// [`SampleOut::state`] of a sample a sparse (checkerboard) iteration did
+/// not search; [`fill_skipped`] gives it its neighbours' result.
+const SKIPPED: u8 = 3;
+
+/// Give every [`SKIPPED`] sample the result of its searched 4-neighbours
+/// (periodic in u, clamped in v): the median shift of those that moved
+/// (state 1 or 2; the sample stays put when none did) and the mean η of all
+/// of them. `fills` is scratch.
+fn fill_skipped(outs: &mut [SampleOut], un: usize, vn: usize, fills: &mut Vec<(usize, SampleOut)>) {
+    fills.clear();
+    for j in 0..vn {
+        for i in 0..un {
+            let k = j * un + i;
+            if outs[k].state != SKIPPED {
+                continue;
+            }
+            let left = if i == 0 { un - 1 } else { i - 1 };
+            let right = if i + 1 == un { 0 } else { i + 1 };
+            let mut moved = [0.0f64; 4];
+            let (mut n_moved, mut n_eta, mut eta) = (0usize, 0usize, 0.0);
+            let mut visit = |o: &SampleOut| {
+                if o.state == SKIPPED {
+                    return;
+                }
+                n_eta += 1;
+                eta += o.eta;
+                if o.state != 0 {
+                    moved[n_moved] = o.shift;
+                    n_moved += 1;
+                }
+            };
+            visit(&outs[j * un + left]);
+            visit(&outs[j * un + right]);
+            if j > 0 {
+                visit(&outs[k - un]);
+            }
+            if j + 1 < vn {
+                visit(&outs[k + un]);
+            }
+            let mut out = SampleOut {
+                state: 0,
+                shift: 0.0,
+                eta: if n_eta > 0 { eta / n_eta as f64 } else { 0.0 },
+                ..outs[k]
+            };
+            if n_moved > 0 {
+                let s = &mut moved[..n_moved];
+                insertion_sort_by(s, |&x| x);
+                out.shift = if n_moved % 2 == 1 {
+                    s[n_moved / 2]
+                } else {
+                    0.5 * (s[n_moved / 2 - 1] + s[n_moved / 2])
+                };
+                out.state = 1;
+            }
+            fills.push((k, out));
+        }
+    }
+    for &(k, o) in fills.iter() {
+        outs[k] = o;
     }
 }
 
@@ -783,6 +860,7 @@ pub(crate) fn run(
     let chunks = 4 * rayon::current_num_threads().max(1);
     let mut scratches: Vec<ThreadScratch> = (0..chunks).map(|_| ThreadScratch::default()).collect();
     let mut outs: Vec<SampleOut> = Vec::new();
+    let mut fills: Vec<(usize, SampleOut)> = Vec::new();
     let mut shifts: Vec<f64> = Vec::new();
     let mut targets: Vec<Vec3> = Vec::new();
     let mut moving: Vec<f64> = Vec::new();
@@ -828,7 +906,22 @@ pub(crate) fn run(
         let fit = fits.get(cfg, m, l)?;
         let layout = fit.layout().clone();
         let t_search = Instant::now();
-        stepper.search_all(&surface, &layout, depth, true, &mut outs, &mut scratches);
+        // Sparse warm search: a checkerboard half of the samples, the half
+        // alternating from iteration to iteration (and frame to frame).
+        let skip = (cfg.sparse_warm_search && warm.is_some())
+            .then(|| (it + warm.map_or(0, |w| w.phase)) % 2);
+        stepper.search_all(
+            &surface,
+            &layout,
+            depth,
+            true,
+            skip,
+            &mut outs,
+            &mut scratches,
+        );
+        if skip.is_some() {
+            fill_skipped(&mut outs, layout.u_n(), layout.v_n(), &mut fills);
+        }
         let eta_g = outs.iter().map(|o| o.eta).sum::<f64>() / outs.len() as f64;
         last_eta.clear();
         last_eta.extend(outs.iter().map(|o| o.eta));
@@ -853,7 +946,14 @@ pub(crate) fn run(
         fit.fit(&mut surface, &targets)?;
         times.fit_ms += ms(t_fit);
         grids.push([m, l]);
-        let prev = eta_hist.last().copied();
+        // A sparse iteration's η_g is compared with the last one that
+        // searched the same half (two back): the halves differ a little.
+        let back = if skip.is_some() { 2 } else { 1 };
+        let prev = eta_hist
+            .len()
+            .checked_sub(back)
+            .and_then(|k| eta_hist.get(k))
+            .copied();
         eta_hist.push(eta_g);
         iter_on_grid += 1;
         // Shrink the search depth, but not below what the membrane still
@@ -912,7 +1012,15 @@ pub(crate) fn run(
     let eta: Vec<f64> = if last_eta_grid == [m, l] && last_eta.len() == layout.len() {
         last_eta
     } else {
-        stepper.search_all(&surface, &layout, floor, false, &mut outs, &mut scratches);
+        stepper.search_all(
+            &surface,
+            &layout,
+            floor,
+            false,
+            None,
+            &mut outs,
+            &mut scratches,
+        );
         outs.iter().map(|o| o.eta).collect()
     };
     let eta_final = eta.iter().sum::<f64>() / eta.len().max(1) as f64;
@@ -948,4 +1056,68 @@ pub(crate) fn run(
         surface,
         report,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn searched(shift: f64, eta: f64, state: u8) -> SampleOut {
+        SampleOut {
+            shift,
+            eta,
+            state,
+            ..SampleOut::default()
+        }
+    }
+
+    #[test]
+    fn skipped_samples_take_the_median_shift_of_their_moving_neighbours() {
+        // 4 × 3 samples (u periodic), checkerboard: (i + j) odd skipped.
+        let (un, vn) = (4, 3);
+        let mut outs = vec![SampleOut::default(); un * vn];
+        for j in 0..vn {
+            for i in 0..un {
+                let k = j * un + i;
+                outs[k] = if (i + j) % 2 == 1 {
+                    SampleOut {
+                        p: Vec3::new(i as f64, j as f64, 0.0),
+                        state: SKIPPED,
+                        ..SampleOut::default()
+                    }
+                } else {
+                    // Shift = flat index; row 2 does not move.
+                    searched(k as f64, 0.1 * k as f64, u8::from(j < 2))
+                };
+            }
+        }
+        let mut fills = Vec::new();
+        fill_skipped(&mut outs, un, vn, &mut fills);
+        // (1, 0): neighbours (0,0)=0, (2,0)=2 and (1,1)=5 moved -> median 2.
+        assert_eq!(outs[1].state, 1);
+        assert_eq!(outs[1].shift, 2.0);
+        assert!((outs[1].eta - 0.1 * (0.0 + 2.0 + 5.0) / 3.0).abs() < 1e-12);
+        assert_eq!(outs[1].p, Vec3::new(1.0, 0.0, 0.0));
+        // (3, 0): periodic left (2,0)=2, right (0,0)=0, below (3,1)=7.
+        assert_eq!(outs[3].shift, 2.0);
+        // (0, 1): left wraps to (3,1)=7, right (1,1)=5, up (0,0)=0,
+        // down (0,2) does not move -> median of 0, 5, 7.
+        assert_eq!(outs[4].shift, 5.0);
+        assert!((outs[4].eta - 0.1 * (7.0 + 5.0 + 0.0 + 8.0) / 4.0).abs() < 1e-12);
+        // (1, 2): (0,2), (2,2) do not move, (1,1)=5 moved.
+        assert_eq!(outs[9].shift, 5.0);
+        // Nothing is left skipped.
+        assert!(outs.iter().all(|o| o.state != SKIPPED));
+
+        // A skipped sample whose neighbours all stayed put stays put.
+        let mut still = vec![searched(1.0, 0.5, 0); 4];
+        still[1] = SampleOut {
+            state: SKIPPED,
+            shift: 9.0,
+            ..SampleOut::default()
+        };
+        fill_skipped(&mut still, 4, 1, &mut fills);
+        assert_eq!((still[1].state, still[1].shift), (0, 0.0));
+        assert!((still[1].eta - 0.5).abs() < 1e-12);
+    }
 }

@@ -116,6 +116,10 @@ impl Budget {
 pub struct WarmStart {
     /// The surface to continue from (its grid size is kept).
     pub surface: ClosedSurface,
+    /// Which checkerboard half of the samples the first iteration searches
+    /// when `membrane.sparse_warm_search` is on (its parity; consecutive
+    /// frames pass consecutive values so both halves take turns).
+    pub phase: usize,
 }
 
 /// Why the evolution stopped.
@@ -221,6 +225,7 @@ impl Reconstruction {
     pub fn warm_start(&self) -> WarmStart {
         WarmStart {
             surface: self.surface.clone(),
+            phase: self.report.iterations,
         }
     }
 }

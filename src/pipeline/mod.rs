@@ -219,6 +219,16 @@ pub enum PathReason {
         /// η_g of the last cold frame.
         reference: f64,
     },
+    /// A warm result failed one of the checks above, but its cold redo did
+    /// not score higher by the factor of that check: the frame itself
+    /// separates worse (a thinner or edge-on view), and the warm result,
+    /// which keeps what earlier frames saw, is kept.
+    WarmKept {
+        /// η_g of the warm result.
+        eta: f64,
+        /// η_g of the cold redo.
+        cold: f64,
+    },
 }
 
 impl fmt::Display for PathReason {
@@ -231,6 +241,7 @@ impl fmt::Display for PathReason {
             Self::Resized { fraction } => write!(f, "resized({fraction:.2})"),
             Self::WarmFailed { eta, previous } => write!(f, "warm_failed({eta:.3}<{previous:.3})"),
             Self::Drifted { eta, reference } => write!(f, "drifted({eta:.3}<{reference:.3})"),
+            Self::WarmKept { eta, cold } => write!(f, "warm_kept({eta:.3},cold {cold:.3})"),
         }
     }
 }
@@ -455,9 +466,26 @@ impl Tracker {
                             reference: prev.eta_ref,
                         }
                     };
-                    final_path = StartPath::Cold;
-                    if cold.report.eta_final >= eta {
+                    // The cold result replaces the warm one only when it
+                    // passes the check the warm one failed. When the frame
+                    // itself separates worse (a new, thinner or edge-on
+                    // view), a cold start fails it too, and the warm
+                    // surface, which keeps what earlier frames saw of the
+                    // unseen side, is the better guess.
+                    let threshold = if failed {
+                        cfg.warm_eta_ratio * prev.eta
+                    } else {
+                        cfg.warm_eta_ref_ratio * prev.eta_ref
+                    };
+                    let cold_eta = cold.report.eta_final;
+                    if cold_eta >= threshold && cold_eta >= eta {
+                        final_path = StartPath::Cold;
                         rec = cold;
+                    } else {
+                        reason = PathReason::WarmKept {
+                            eta,
+                            cold: cold_eta,
+                        };
                     }
                 }
             }
@@ -553,7 +581,10 @@ impl Tracker {
             Ok(surface) => (
                 StartPath::Warm,
                 PathReason::Tracked,
-                Some(WarmStart { surface }),
+                Some(WarmStart {
+                    surface,
+                    phase: self.stats.frames as usize,
+                }),
                 Some(motion),
             ),
             Err(_) => cold(PathReason::FirstFrame),
