@@ -571,13 +571,7 @@ impl Tracker {
         } else {
             shift
         };
-        let net: Vec<Vec3> = prev
-            .surface
-            .net()
-            .iter()
-            .map(|p| motion.transform_point(&(*p).into()).coords)
-            .collect();
-        match ClosedSurface::from_net(prev.surface.m(), prev.surface.l(), net) {
+        match prev.surface.rigidly_moved(&motion) {
             Ok(surface) => (
                 StartPath::Warm,
                 PathReason::Tracked,

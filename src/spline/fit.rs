@@ -12,6 +12,7 @@
 use super::surface::{ClosedSurface, Layout};
 use super::SplineError;
 use crate::cloud::Vec3;
+use std::sync::Arc;
 
 /// A factored least-squares system for one `(M, L, u_n, v_n)` sample layout.
 #[derive(Debug, Clone)]
@@ -19,10 +20,12 @@ pub struct FitSystem {
     layout: Layout,
     n: usize,
     bw: usize,
-    /// Banded lower Cholesky factor: row i holds columns i−bw..=i.
-    chol: Vec<f64>,
-    /// Per sample: 16 (unknown, weight) pairs (poles may repeat).
-    rows: Vec<[(u32, f64); 16]>,
+    /// Banded lower Cholesky factor: row i holds columns i−bw..=i. Shared:
+    /// a clone of the system (one per reconstruction, from the process-wide
+    /// cache) copies only the right-hand side buffers.
+    chol: Arc<[f64]>,
+    /// Per sample: 16 (unknown, weight) pairs (poles may repeat). Shared.
+    rows: Arc<[[(u32, f64); 16]]>,
     rhs: Vec<Vec3>,
     x: Vec<Vec3>,
     roughness: f64,
@@ -125,8 +128,8 @@ impl FitSystem {
             layout,
             n,
             bw,
-            chol: band,
-            rows,
+            chol: band.into(),
+            rows: rows.into(),
             rhs: vec![Vec3::zeros(); n],
             x: vec![Vec3::zeros(); n],
             roughness,
@@ -188,12 +191,9 @@ fn factor_band(a: &mut [f64], n: usize, bw: usize) -> Result<(), SplineError> {
         let i0 = i.saturating_sub(bw);
         for j in i0..=i {
             let p0 = i0.max(j.saturating_sub(bw));
-            let mut s = a[i * width + (j + bw - i)];
             let ri = i * width + bw - i;
             let rj = j * width + bw - j;
-            for p in p0..j {
-                s -= a[ri + p] * a[rj + p];
-            }
+            let s = a[i * width + (j + bw - i)] - dot(&a[ri + p0..ri + j], &a[rj + p0..rj + j]);
             if i == j {
                 if s.is_nan() || s <= 0.0 || !s.is_finite() {
                     return Err(SplineError::Singular { row: i });
@@ -207,24 +207,44 @@ fn factor_band(a: &mut [f64], n: usize, bw: usize) -> Result<(), SplineError> {
     Ok(())
 }
 
+/// `Σ a_k b_k` with four independent partial sums (the factorisation's
+/// inner loop; one running sum would be a serial chain of dependent adds).
+#[inline]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for k in 0..4 {
+            acc[k] += x[k] * y[k];
+        }
+    }
+    let tail: f64 = ra.iter().zip(rb).map(|(x, y)| x * y).sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+}
+
 /// Solve `L Lᵀ x = b` for three right-hand sides at once.
 fn solve_band(l: &[f64], n: usize, bw: usize, b: &[Vec3], x: &mut [Vec3]) {
     let width = bw + 1;
     for i in 0..n {
+        let p0 = i.saturating_sub(bw);
+        let row = &l[i * width + bw - (i - p0)..i * width + bw];
         let mut s = b[i];
-        let ri = i * width + bw - i;
-        for (p, xp) in x.iter().enumerate().take(i).skip(i.saturating_sub(bw)) {
-            s -= xp * l[ri + p];
+        for (xp, &lip) in x[p0..i].iter().zip(row) {
+            s -= xp * lip;
         }
         x[i] = s / l[i * width + bw];
     }
+    // Lᵀ x = y by columns of Lᵀ (rows of L, contiguous in the band): once
+    // x_i is final, remove its share from the unknowns above it.
     for i in (0..n).rev() {
-        let mut s = x[i];
-        let end = (i + bw).min(n - 1);
-        for q in i + 1..=end {
-            s -= x[q] * l[q * width + (i + bw - q)];
+        let xi = x[i] / l[i * width + bw];
+        x[i] = xi;
+        let p0 = i.saturating_sub(bw);
+        let row = &l[i * width + bw - (i - p0)..i * width + bw];
+        for (xp, &lip) in x[p0..i].iter_mut().zip(row) {
+            *xp -= xi * lip;
         }
-        x[i] = s / l[i * width + bw];
     }
 }
 
