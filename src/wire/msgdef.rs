@@ -591,6 +591,37 @@ pub fn check_cdr(type_name: &str, bytes: &[u8]) -> Result<usize, WireError> {
     Ok(w.pos)
 }
 
+/// `(alignment, size)` of message `type_name` when every primitive in it
+/// (nested messages and fixed arrays included) has one size `a` and it holds
+/// no string or sequence: its CDR encoding is then exactly `size` bytes at
+/// any offset aligned to `a`, with no padding. `None` otherwise (and for
+/// empty messages, or nesting deeper than 16).
+fn uniform_layout(defs: &DefMap, type_name: &str, depth: usize) -> Option<(usize, usize)> {
+    if depth > 16 {
+        return None;
+    }
+    let def = defs.get(type_name)?;
+    let (mut align, mut size) = (0usize, 0usize);
+    for f in &def.fields {
+        let n = match f.array {
+            ArrayKind::Single => 1,
+            ArrayKind::Fixed(n) => n,
+            ArrayKind::Bounded(_) | ArrayKind::Unbounded => return None,
+        };
+        let (a, s) = match &f.base {
+            BaseType::Primitive(prim) => (prim.size(), prim.size()),
+            BaseType::Nested(m) => uniform_layout(defs, m, depth + 1)?,
+            BaseType::String { .. } | BaseType::WString { .. } => return None,
+        };
+        if align != 0 && a != align {
+            return None;
+        }
+        align = a;
+        size = size.checked_add(s.checked_mul(n)?)?;
+    }
+    (size > 0).then_some((align, size))
+}
+
 struct Walker<'a> {
     buf: &'a [u8],
     pos: usize,
@@ -655,6 +686,26 @@ impl Walker<'_> {
                         self.take(1, len, &p)?;
                     }
                 }
+                (BaseType::Nested(n), Some(count)) if count > 1 => {
+                    if let Some((align, size)) = uniform_layout(defs, n, 0) {
+                        // Elements of one primitive size and no sequences
+                        // (points, triangles, colours): contiguous on the
+                        // wire, so the array is checked as one block.
+                        let total = count
+                            .checked_mul(size)
+                            .ok_or_else(|| self.truncated(&p, count))?;
+                        self.take(align, total, &p)?;
+                        continue;
+                    }
+                    for _ in 0..count {
+                        let before = self.pos;
+                        self.message(defs, n, &p)?;
+                        if self.pos == before {
+                            // An element without data: all the others are empty too.
+                            break;
+                        }
+                    }
+                }
                 (BaseType::Nested(n), count) => {
                     for _ in 0..count.unwrap_or(1) {
                         let before = self.pos;
@@ -694,6 +745,41 @@ mod tests {
         assert!(parse_msg("p/msg/T", "int32[x] a\n").is_err());
         assert!(parse_msg("p/msg/T", "int32\n").is_err());
         assert!(parse_msg("p/msg/T", "in-t a\n").is_err());
+    }
+
+    #[test]
+    fn uniform_arrays_are_checked_as_one_block_with_the_same_verdict() {
+        let defs = registry().unwrap();
+        assert_eq!(
+            uniform_layout(defs, "geometry_msgs/msg/Point", 0),
+            Some((8, 24))
+        );
+        assert_eq!(
+            uniform_layout(defs, "std_msgs/msg/ColorRGBA", 0),
+            Some((4, 16))
+        );
+        assert_eq!(uniform_layout(defs, "std_msgs/msg/Header", 0), None);
+        // A marker whose points and colours hold 1000 entries each: the
+        // encoder's bytes pass, and every truncation of them fails.
+        let marker = crate::wire::msgs::Marker {
+            points: vec![crate::wire::msgs::Point::default(); 1000],
+            colors: vec![crate::wire::msgs::ColorRGBA::default(); 1000],
+            ..Default::default()
+        };
+        let bytes = crate::wire::encode(&marker).unwrap();
+        assert_eq!(
+            check_cdr("visualization_msgs/msg/Marker", &bytes).unwrap(),
+            bytes.len() - 4
+        );
+        for cut in [bytes.len() - 1, bytes.len() - 17, bytes.len() / 2, 40] {
+            assert!(
+                matches!(
+                    check_cdr("visualization_msgs/msg/Marker", &bytes[..cut]),
+                    Err(WireError::Truncated { .. })
+                ),
+                "cut {cut}"
+            );
+        }
     }
 
     #[test]
