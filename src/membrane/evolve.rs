@@ -20,7 +20,7 @@ use crate::density::{median_of, Density};
 use crate::separability::attribute::{AttributeSet, AttributeWeights, ChannelWeight};
 use crate::separability::grid::SpatialIndex;
 use crate::separability::search::{BestRule, Cuboid, Delta, SearchScratch, Searcher};
-use crate::spline::{regrid, ClosedSurface, FitSystem, Layout};
+use crate::spline::{regrid, ClosedSurface, FitSystem, Layout, SurfacePoint};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::{Mutex, OnceLock};
@@ -277,12 +277,8 @@ impl Stepper<'_> {
         let scratch = &mut ts.search;
         let cfg = self.cfg;
         let sp = surface.eval_at(layout, i, j);
-        let n = surface.normal(&sp);
-        let still = SampleOut {
-            p: sp.p,
-            n,
-            ..SampleOut::default()
-        };
+        let still = unsearched(surface, &sp, 0);
+        let n = still.n;
         let cmin = cfg.cross_min_delta * self.delta;
         let cmax = self.cross_max.max(cmin);
         let w = (sp.su.norm() / layout.u_n() as f64 * cfg.cross_scale).clamp(cmin, cmax);
@@ -403,18 +399,23 @@ impl Stepper<'_> {
                     let j = c * rows_per + k / un;
                     let i = k % un;
                     *o = if skip.is_some_and(|p| (i + j + p) % 2 == 1) {
-                        let sp = surface.eval_at(layout, i, j);
-                        SampleOut {
-                            p: sp.p,
-                            n: surface.normal(&sp),
-                            state: SKIPPED,
-                            ..SampleOut::default()
-                        }
+                        unsearched(surface, &surface.eval_at(layout, i, j), SKIPPED)
                     } else {
                         self.sample(surface, layout, i, j, depth, allow_inward, scratch)
                     };
                 }
             });
+    }
+}
+
+/// A sample at `sp` that does not move (yet): its point and unit normal,
+/// with `state`.
+fn unsearched(surface: &ClosedSurface, sp: &SurfacePoint, state: u8) -> SampleOut {
+    SampleOut {
+        p: sp.p,
+        n: surface.normal(sp),
+        state,
+        ..SampleOut::default()
     }
 }
 
@@ -464,13 +465,7 @@ fn fill_skipped(outs: &mut [SampleOut], un: usize, vn: usize, fills: &mut Vec<(u
                 ..outs[k]
             };
             if n_moved > 0 {
-                let s = &mut moved[..n_moved];
-                insertion_sort_by(s, |&x| x);
-                out.shift = if n_moved % 2 == 1 {
-                    s[n_moved / 2]
-                } else {
-                    0.5 * (s[n_moved / 2 - 1] + s[n_moved / 2])
-                };
+                out.shift = median_of_few(&mut moved[..n_moved]);
                 out.state = 1;
             }
             fills.push((k, out));
@@ -502,6 +497,18 @@ fn insertion_sort_by<T: Copy>(v: &mut [T], key: impl Fn(&T) -> f64) {
     }
 }
 
+/// Median of a short non-empty slice (the middle pair's mean for an even
+/// length); sorts it in place.
+fn median_of_few(s: &mut [f64]) -> f64 {
+    insertion_sort_by(s, |&x| x);
+    let n = s.len();
+    if n % 2 == 1 {
+        s[n / 2]
+    } else {
+        0.5 * (s[n / 2 - 1] + s[n / 2])
+    }
+}
+
 /// Median of the shifts of moving samples in each 3×3 neighbourhood
 /// (periodic in u, clamped in v); samples that do not move stay put.
 fn median_filter(outs: &[SampleOut], un: usize, vn: usize, shifts: &mut Vec<f64>) {
@@ -528,13 +535,7 @@ fn median_filter(outs: &[SampleOut], un: usize, vn: usize, shifts: &mut Vec<f64>
                     }
                 }
             }
-            let s = &mut buf[..n];
-            insertion_sort_by(s, |&x| x);
-            shifts[k] = if n % 2 == 1 {
-                s[n / 2]
-            } else {
-                0.5 * (s[n / 2 - 1] + s[n / 2])
-            };
+            shifts[k] = median_of_few(&mut buf[..n]);
         }
     }
 }

@@ -219,10 +219,10 @@ pub enum PathReason {
         /// η_g of the last cold frame.
         reference: f64,
     },
-    /// A warm result failed one of the checks above, but its cold redo did
-    /// not score higher by the factor of that check: the frame itself
-    /// separates worse (a thinner or edge-on view), and the warm result,
-    /// which keeps what earlier frames saw, is kept.
+    /// A warm result failed one of the checks above, and its cold redo
+    /// failed that check too: the frame itself separates worse (a thinner
+    /// or edge-on view), and the warm result, which keeps what earlier
+    /// frames saw, is kept.
     WarmKept {
         /// η_g of the warm result.
         eta: f64,
@@ -443,8 +443,10 @@ impl Tracker {
         if path == StartPath::Warm {
             if let Some(prev) = &self.previous {
                 let eta = rec.report.eta_final;
-                let failed = eta < cfg.warm_eta_ratio * prev.eta;
-                let drifted = eta < cfg.warm_eta_ref_ratio * prev.eta_ref;
+                let fail_below = cfg.warm_eta_ratio * prev.eta;
+                let drift_below = cfg.warm_eta_ref_ratio * prev.eta_ref;
+                let failed = eta < fail_below;
+                let drifted = eta < drift_below;
                 if failed || drifted {
                     self.stats.fallbacks += 1;
                     let budget = Budget {
@@ -472,11 +474,7 @@ impl Tracker {
                     // view), a cold start fails it too, and the warm
                     // surface, which keeps what earlier frames saw of the
                     // unseen side, is the better guess.
-                    let threshold = if failed {
-                        cfg.warm_eta_ratio * prev.eta
-                    } else {
-                        cfg.warm_eta_ref_ratio * prev.eta_ref
-                    };
+                    let threshold = if failed { fail_below } else { drift_below };
                     let cold_eta = cold.report.eta_final;
                     if cold_eta >= threshold && cold_eta >= eta {
                         final_path = StartPath::Cold;
