@@ -49,8 +49,13 @@ pub struct MembraneConfig {
     /// Compute d_i for at most this many points (a spread subset) and filter
     /// outliers by voxel counts instead of per-point d_i (0: every point).
     pub density_sample: usize,
-    /// Use the local δ_R (paper Eq. 6) in the search instead of the global median δ.
+    /// Use the local δ_R (paper Eq. 6) in the search instead of the global δ.
     pub local_delta: bool,
+    /// Global δ of a whole object (not a single view, which uses the
+    /// median): this quantile of the kept points' d_i (0.5: the median).
+    pub delta_quantile: f64,
+    /// Global δ of a whole object: that quantile times this factor.
+    pub delta_scale: f64,
     /// Axis of the two poles.
     pub pole_axis: PoleAxis,
     /// Quantile used for the robust extreme points of the initial octagon.
@@ -147,6 +152,8 @@ impl Default for MembraneConfig {
             outlier_factor: 2.0,
             density_sample: 0,
             local_delta: false,
+            delta_quantile: 0.25,
+            delta_scale: 1.3,
             pole_axis: PoleAxis::Shortest,
             init_quantile: 0.002,
             init_margin: 1.05,

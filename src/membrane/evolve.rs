@@ -106,6 +106,12 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), MembraneError> {
             return bad(k, "must be a finite value >= 0");
         }
     }
+    if !(cfg.delta_quantile > 0.0 && cfg.delta_quantile <= 1.0) {
+        return bad("delta_quantile", "must be in (0, 1]");
+    }
+    if !pos(cfg.delta_scale) {
+        return bad("delta_scale", "must be positive");
+    }
     if cfg.init_quantile >= 0.5 {
         return bad("init_quantile", "must be below 0.5");
     }
@@ -745,11 +751,25 @@ pub(crate) fn run(
         }
         .into());
     }
-    let delta = {
+    // δ: the median d_i for a single view, where the spacing varies with
+    // depth and incidence; delta_scale × the delta_quantile of d_i for a
+    // whole object (default 1.3 × the lower quartile, which measures the
+    // surface's own spacing even when up to half the points are outliers).
+    let quantile = |q: f64| {
         let mut v = d_kept.clone();
-        let mid = v.len() / 2;
-        let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
-        (*m).max(1e-9 * scale)
+        let at = ((v.len() as f64 * q) as usize).min(v.len().saturating_sub(1));
+        v.select_nth_unstable_by(at, f64::total_cmp)
+            .1
+            .max(1e-9 * scale)
+    };
+    let median = quantile(0.5);
+    // Single views: the viewpoint, its z-buffer, and the mirrored completion
+    // of the unseen side (membrane/view.rs).
+    let mut view = view::resolve(cfg.viewpoint, &points, median);
+    let delta = if view.is_some() {
+        median
+    } else {
+        (quantile(cfg.delta_quantile) * cfg.delta_scale).max(1e-9 * scale)
     };
     // Per-point d_i of the used points (the sampled density knows only δ).
     let d_used = if d_kept.len() == points.len() {
@@ -757,10 +777,7 @@ pub(crate) fn run(
     } else {
         vec![delta; points.len()]
     };
-    // Single views: the viewpoint, its z-buffer, and the mirrored completion
-    // of the unseen side (membrane/view.rs).
     let (mut points, mut d_used) = (points, d_used);
-    let mut view = view::resolve(cfg.viewpoint, &points, delta);
     let mut points_completed = 0;
     if let (Some(vb), true) = (&mut view, cfg.view_completion) {
         let extra = vb.complete(&points);

@@ -18,7 +18,9 @@
 //! default) whenever `Δη_g < g_min`. On top of the paper's recipe this
 //! implementation adds the mechanisms that decided the outcome in the
 //! prototype (see `notes/prototype-findings.md`): a k-NN outlier filter, δ as
-//! the median k-NN distance, the "inner side denser" rule, a dense-side
+//! a robust k-NN distance (the median of d_i, Eq. 5, for a single view;
+//! 1.3 × their lower quartile for a whole object), the
+//! "inner side denser" rule, a dense-side
 //! significance test, a robust median shift, a 3×3 median filter of shifts,
 //! a roughness-penalised fit, a shrinking search depth with a δ floor, and an
 //! inward force gated by an occupancy inside/outside grid ([`occupancy`]).
@@ -181,7 +183,8 @@ pub struct Report {
     pub points_completed: usize,
     /// The viewpoint used (given or detected), if any.
     pub viewpoint: Option<[f64; 3]>,
-    /// Global point spacing δ (median k-NN distance) in input units.
+    /// Global point spacing δ (`delta_scale` × the `delta_quantile` of the
+    /// k-NN distances d_i) in input units.
     pub delta: f64,
     /// Object size (longest bounding-box edge of the used points) in input units.
     pub scale: f64,
