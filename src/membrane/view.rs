@@ -9,8 +9,10 @@
 //!
 //! 1. **Viewpoint.** Given (`membrane.viewpoint = [x, y, z]`), or detected
 //!    (`"auto"`): the origin of the cloud's frame (a sensor frame) is taken
-//!    as the viewpoint when it lies outside the cloud's bounding box and the
-//!    cloud is a single layer seen from it — in an angular z-buffer from the
+//!    as the viewpoint when it lies at least [`MIN_VIEW_DISTANCE`] object
+//!    sizes outside the cloud's bounding box (a cloud in a model or object
+//!    frame has its origin in or next to the object) and the cloud is a
+//!    single layer seen from it — in an angular z-buffer from the
 //!    origin, at most [`MAX_TWO_LAYER_FRACTION`] of the occupied bins hold
 //!    two depth layers (a gap over [`LAYER_GAP_DELTA`]·δ), where a scan from
 //!    all around holds two layers (front and back) in nearly every bin.
@@ -35,6 +37,13 @@ use super::occupancy::OutsideGrid;
 use crate::cloud::Vec3;
 use serde::{Deserialize, Serialize};
 
+/// Least distance of an auto-detected viewpoint from the cloud's bounding
+/// box, in multiples of its longest edge. Depth cameras stand well away
+/// from what they segment (a tabletop object at 0.5–1.5 m is 2–20 sizes
+/// away); the PCL bunny scan, stored in the mesh's frame, has the origin
+/// 0.2 sizes below the bunny's feet, and taking it as the camera cost F
+/// 0.21 -> 0.12.
+pub const MIN_VIEW_DISTANCE: f64 = 0.5;
 /// Largest fraction of two-layer bins for a cloud to count as one view.
 pub const MAX_TWO_LAYER_FRACTION: f64 = 0.2;
 /// Depth gap (in δ) that separates two layers within one z-buffer bin.
@@ -318,8 +327,10 @@ pub fn resolve(viewpoint: Viewpoint, points: &[Vec3], delta: f64) -> Option<View
                 lo = lo.inf(p);
                 hi = hi.sup(p);
             }
-            let inside = (0..3).all(|k| lo[k] - delta <= eye[k] && eye[k] <= hi[k] + delta);
-            if inside {
+            // Distance from the eye to the bounding box (0 inside it).
+            let gap = (lo - eye).sup(&(eye - hi)).sup(&Vec3::zeros()).norm();
+            let size = (hi - lo).max();
+            if !(gap > MIN_VIEW_DISTANCE * size && gap > delta) {
                 return None;
             }
             let vb = ViewBuffer::new(points, eye, delta)?;
@@ -364,6 +375,14 @@ mod tests {
         // A cloud around the origin has no outside viewpoint.
         let around = sphere(2000, 1.0, Vec3::zeros());
         assert!(resolve(Viewpoint::Mode(ViewMode::Auto), &around, 0.05).is_none());
+        // Nor has a cap whose frame's origin lies just off it (a model
+        // frame): 0.3 sizes away.
+        let near = Vec3::new(0.0, 0.0, 0.2 * 0.3 + 0.1);
+        let cap_near: Vec<Vec3> = sphere(6000, 0.1, near)
+            .into_iter()
+            .filter(|p| (p - near).dot(&(-near).normalize()) > 0.05 * 0.1)
+            .collect();
+        assert!(resolve(Viewpoint::Mode(ViewMode::Auto), &cap_near, delta).is_none());
         assert!(resolve(Viewpoint::Mode(ViewMode::None), &cap, delta).is_none());
         assert!(resolve(Viewpoint::Point([0.0, 0.0, 0.0]), &cap, delta).is_some());
     }
