@@ -183,8 +183,9 @@ pub struct Report {
     pub points_completed: usize,
     /// The viewpoint used (given or detected), if any.
     pub viewpoint: Option<[f64; 3]>,
-    /// Global point spacing δ (`delta_scale` × the `delta_quantile` of the
-    /// k-NN distances d_i) in input units.
+    /// Global point spacing δ in input units: the median k-NN distance d_i
+    /// for a single view, `delta_scale` × the `delta_quantile` of the d_i
+    /// for a whole object.
     pub delta: f64,
     /// Object size (longest bounding-box edge of the used points) in input units.
     pub scale: f64,
