@@ -109,6 +109,18 @@ impl Aabb {
         self.extent().max()
     }
 
+    /// Euclidean distance from `p` to the box (0 inside it, +∞ for the
+    /// empty box).
+    pub fn distance_to(&self, p: &Vec3) -> f64 {
+        if self.is_empty() {
+            return f64::INFINITY;
+        }
+        (self.min - p)
+            .sup(&(p - self.max))
+            .sup(&Vec3::zeros())
+            .norm()
+    }
+
     /// Centre of the box.
     pub fn center(&self) -> Vec3 {
         (self.min + self.max) * 0.5
@@ -318,6 +330,15 @@ impl PointCloud {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn distance_to_a_box_is_zero_inside_and_euclidean_outside() {
+        let b = Aabb::from_points(&[Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 2.0, 3.0)]);
+        assert_eq!(b.distance_to(&Vec3::new(0.5, 1.0, 1.0)), 0.0);
+        assert_eq!(b.distance_to(&Vec3::new(-3.0, 1.0, 1.0)), 3.0);
+        assert!((b.distance_to(&Vec3::new(4.0, 6.0, 3.0)) - 5.0).abs() < 1e-12);
+        assert_eq!(Aabb::empty().distance_to(&Vec3::zeros()), f64::INFINITY);
+    }
 
     #[test]
     fn drop_non_finite_keeps_attributes_aligned() {

@@ -755,10 +755,11 @@ pub(crate) fn run(
     // depth and incidence; delta_scale × the delta_quantile of d_i for a
     // whole object (default 1.3 × the lower quartile, which measures the
     // surface's own spacing even when up to half the points are outliers).
-    let quantile = |q: f64| {
-        let mut v = d_kept.clone();
-        let at = ((v.len() as f64 * q) as usize).min(v.len().saturating_sub(1));
-        v.select_nth_unstable_by(at, f64::total_cmp)
+    let mut d_order = d_kept.clone();
+    let mut quantile = |q: f64| {
+        let at = ((d_order.len() as f64 * q) as usize).min(d_order.len().saturating_sub(1));
+        d_order
+            .select_nth_unstable_by(at, f64::total_cmp)
             .1
             .max(1e-9 * scale)
     };

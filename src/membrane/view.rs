@@ -34,7 +34,7 @@
 //!    still never materialised.
 
 use super::occupancy::OutsideGrid;
-use crate::cloud::Vec3;
+use crate::cloud::{Aabb, Vec3};
 use serde::{Deserialize, Serialize};
 
 /// Least distance of an auto-detected viewpoint from the cloud's bounding
@@ -321,15 +321,9 @@ pub fn resolve(viewpoint: Viewpoint, points: &[Vec3], delta: f64) -> Option<View
         Viewpoint::Point(p) => ViewBuffer::new(points, Vec3::new(p[0], p[1], p[2]), delta),
         Viewpoint::Mode(ViewMode::Auto) => {
             let eye = Vec3::zeros();
-            let mut lo = Vec3::repeat(f64::INFINITY);
-            let mut hi = Vec3::repeat(f64::NEG_INFINITY);
-            for p in points {
-                lo = lo.inf(p);
-                hi = hi.sup(p);
-            }
-            // Distance from the eye to the bounding box (0 inside it).
-            let gap = (lo - eye).sup(&(eye - hi)).sup(&Vec3::zeros()).norm();
-            let size = (hi - lo).max();
+            let bb = Aabb::from_points(points);
+            let gap = bb.distance_to(&eye);
+            let size = bb.longest_edge();
             if !(gap > MIN_VIEW_DISTANCE * size && gap > delta) {
                 return None;
             }
