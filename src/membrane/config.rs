@@ -109,7 +109,9 @@ pub struct MembraneConfig {
     /// Warm-started iterations search a checkerboard half of the samples
     /// (alternating) and give the other half their neighbours' result.
     pub sparse_warm_search: bool,
-    /// Gated inward force where the occupancy grid says the sample is outside.
+    /// Gated inward force where the occupancy grid says the sample is
+    /// outside: against the normal, or along it for a folded-over pocket
+    /// whose normal faces the object.
     pub inward_force: bool,
     /// Voxel edge of the occupancy grid, in multiples of δ.
     pub inward_voxel_delta: f64,

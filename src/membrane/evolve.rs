@@ -8,6 +8,19 @@
 //! force), median-filters the shifts over the 3×3 sample neighbourhood, moves
 //! the samples by `β·shift` and refits the control net. `η_g` is the mean of
 //! the per-sample accepted maxima `η*`.
+//!
+//! The gated inward force acts on samples with no significant boundary that
+//! lie in empty space outside the object ([`OutsideGrid`]). It moves a
+//! sample by `−inward_step·depth` along its normal when the normal faces
+//! away from the points' centroid. A sample whose normal faces the centroid
+//! belongs either to a legitimately concave part (a bowl's inner wall) or to
+//! a pocket that folded over while wrapping a limb, and "inward" is
+//! ambiguous there: the sample moves toward whichever side of its normal
+//! line first meets solid space, and only when that is the front (the
+//! folded-over case, whose normal faces the object); otherwise it stays.
+//! Without that rule such pockets hang in the empty space between the legs
+//! of an animal or beside the step of a CAD part (Table 1: Spot F 0.75 →
+//! 0.88, Fandisk 0.78 → 0.85, hammer 0.69 → 0.84).
 
 use super::config::MembraneConfig;
 use super::extract::extract_mesh;
@@ -266,6 +279,8 @@ struct Stepper<'a> {
     cross_max: f64,
     /// Centroid of the points: the inward force never moves a sample away from it.
     center: Vec3,
+    /// How far [`Self::inward_sign`] looks along the normal line.
+    reach: f64,
 }
 
 impl Stepper<'_> {
@@ -361,15 +376,41 @@ impl Stepper<'_> {
         // Inward means toward the object: where the surface has folded over
         // (its normal facing the centroid) "inward" would push it outward and
         // inflate the membrane, so the force is withheld there.
-        if allow_inward && n.dot(&(sp.p - self.center)) > 0.0 && self.is_outside(&sp.p) {
+        if allow_inward && self.is_outside(&sp.p) {
+            let sign = self.inward_sign(&sp.p, &n);
+            if sign == 0.0 {
+                return still;
+            }
             return SampleOut {
-                shift: -cfg.inward_step * depth,
+                shift: -sign * cfg.inward_step * depth,
                 eta: 0.0,
                 state: 2,
                 ..still
             };
         }
         still
+    }
+
+    /// Direction of the inward force at an outside sample, as the sign
+    /// `s` of the move `−s·step·n` (see the module docs): 1 (against the
+    /// normal) when the normal faces away from the centroid; −1 (along it)
+    /// when the normal faces the centroid and the normal line meets solid
+    /// space in front before behind (a folded-over pocket); else 0.
+    fn inward_sign(&self, p: &Vec3, n: &Vec3) -> f64 {
+        if n.dot(&(p - self.center)) > 0.0 {
+            return 1.0;
+        }
+        let grid = match self.outside {
+            Some(g) => g,
+            None => return 0.0,
+        };
+        let front = grid.distance_to_solid(p, n, self.reach);
+        let back = grid.distance_to_solid(p, &(-n), self.reach);
+        match (front, back) {
+            (Some(f), Some(b)) if f < b => -1.0,
+            (Some(_), None) => -1.0,
+            _ => 0.0,
+        }
     }
 
     /// Whether the inward force may act at `p` ([`view::outside_at`]).
@@ -834,6 +875,7 @@ pub(crate) fn run(
         view: view.as_ref(),
         cross_max: cfg.cross_max * scale,
         center: points.iter().sum::<Vec3>() / points.len() as f64,
+        reach: scale,
     };
     times.prepare_ms = ms(t_start);
 

@@ -180,6 +180,26 @@ impl OutsideGrid {
         Some(self.outside[(z * ny + y) * nx + x])
     }
 
+    /// Distance from `p` along the unit direction `dir` to the first cell
+    /// that is not outside (occupied, enclosed, or unseen for a single
+    /// view), marching in half-voxel steps up to `max_dist`; `None` when
+    /// the ray leaves the grid or reaches `max_dist` first.
+    pub fn distance_to_solid(&self, p: &Vec3, dir: &Vec3, max_dist: f64) -> Option<f64> {
+        let step = 0.5 / self.inv_voxel;
+        let mut t = step;
+        let mut entered = false;
+        while t <= max_dist {
+            match self.label(&(p + dir * t)) {
+                Some(false) => return Some(t),
+                Some(true) => entered = true,
+                None if entered => return None,
+                None => {}
+            }
+            t += step;
+        }
+        None
+    }
+
     /// Keep the outside label only where `keep(cell centre)` holds (e.g. only
     /// in space a camera saw empty, [`super::view::ViewBuffer::is_seen_free`]).
     pub fn restrict(&mut self, keep: impl Fn(&Vec3) -> bool) {
@@ -229,5 +249,23 @@ mod tests {
         let bowl: Vec<Vec3> = pts.iter().copied().filter(|p| p.z < 0.0).collect();
         let g = OutsideGrid::new(&bowl, 0.1, 11, 1 << 20).unwrap();
         assert!(g.is_outside(&Vec3::new(0.0, 0.0, -0.5)));
+        // From inside the hollow, straight down meets the bowl's floor; up
+        // leaves the grid through the opening.
+        let p = Vec3::new(0.0, 0.0, -0.3);
+        let down = g
+            .distance_to_solid(&p, &Vec3::new(0.0, 0.0, -1.0), 2.0)
+            .unwrap();
+        assert!((down - 0.6).abs() < 0.25, "down {down}");
+        assert_eq!(
+            g.distance_to_solid(&p, &Vec3::new(0.0, 0.0, 1.0), 5.0),
+            None
+        );
+        // A ray starting beyond the grid enters it and meets the shell; a
+        // reach too short meets nothing.
+        let far = Vec3::new(3.0, 0.0, -0.2);
+        let west = Vec3::new(-1.0, 0.0, 0.0);
+        let d = g.distance_to_solid(&far, &west, 5.0).unwrap();
+        assert!((d - 2.0).abs() < 0.25, "from beyond the grid: {d}");
+        assert_eq!(g.distance_to_solid(&far, &west, 1.0), None);
     }
 }
