@@ -280,7 +280,8 @@ struct Stepper<'a> {
     /// The single view, if any: beyond the occupancy grid it decides what is outside.
     view: Option<&'a view::ViewBuffer>,
     cross_max: f64,
-    /// Centroid of the points: the inward force never moves a sample away from it.
+    /// Centroid of the points: a normal facing away from it is the
+    /// unambiguous case of the inward force ([`Self::inward_sign`]).
     center: Vec3,
     /// How far [`Self::inward_sign`] looks along the normal line.
     reach: f64,
@@ -376,9 +377,8 @@ impl Stepper<'_> {
                 };
             }
         }
-        // Inward means toward the object: where the surface has folded over
-        // (its normal facing the centroid) "inward" would push it outward and
-        // inflate the membrane, so the force is withheld there.
+        // Inward means toward the object: `inward_sign` decides the side
+        // (against the normal, along it for a folded-over pocket, or none).
         if allow_inward && self.is_outside(&sp.p) {
             let sign = self.inward_sign(&sp.p, &n);
             if sign == 0.0 {
@@ -408,11 +408,9 @@ impl Stepper<'_> {
             Some(g) if self.view.is_none() => g,
             _ => return 0.0,
         };
-        let front = grid.distance_to_solid(p, n, self.reach);
-        let back = grid.distance_to_solid(p, &(-n), self.reach);
-        match (front, back) {
-            (Some(f), Some(b)) if f < b => -1.0,
-            (Some(_), None) => -1.0,
+        // Only a front hit can move the sample; the back ray runs only then.
+        match grid.distance_to_solid(p, n, self.reach) {
+            Some(f) if grid.distance_to_solid(p, &(-n), f).is_none() => -1.0,
             _ => 0.0,
         }
     }
