@@ -66,7 +66,7 @@ fn bench_search(c: &mut Criterion) {
         &searcher,
         &cuboids,
         &mut scratch,
-        Some(BestRule::InnerDenser),
+        Some(BestRule::InnerDenser { min_inner: 0.0 }),
     );
     for cell in [0.02, 0.06] {
         let index = SpatialIndex::with_cell_size(&pts, cell).unwrap();

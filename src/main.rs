@@ -144,6 +144,11 @@ enum Command {
         /// Override one parameter: section.key=value (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
+        /// Base seed of every random stream (point sampling, noise, outliers,
+        /// metric samples). The default keeps results comparable over time;
+        /// another seed re-runs the same benchmark on fresh samplings.
+        #[arg(long, default_value_t = sepmem::bench::DEFAULT_SEED)]
+        seed: u64,
     },
     /// Run the live node: subscribe to PointCloud2 topics over zenoh
     /// (rmw_zenoh keys by default), publish meshes, markers and diagnostics,
@@ -237,9 +242,10 @@ fn main() -> Result<()> {
             datasets,
             config,
             set,
+            seed,
         } => {
             let cfg = sepmem::config::Config::load(config.as_deref(), &set)?;
-            commands::bench::run(quick, &out, &only, datasets, cfg.membrane)
+            commands::bench::run(quick, &out, &only, datasets, cfg.membrane, seed)
         }
         Command::BenchNode(args) => commands::bench_node::run(&args),
         Command::Node { config, set } => commands::node::run_node(config.as_deref(), &set),

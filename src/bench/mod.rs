@@ -67,6 +67,9 @@ pub const METRIC_SAMPLES: usize = 100_000;
 /// The sections of the benchmark.
 pub const SECTIONS: [&str; 6] = ["table1", "sweep", "adaptive", "ablation", "real", "speed"];
 
+/// The base seed of `sepmem bench` unless `--seed` gives another.
+pub const DEFAULT_SEED: u64 = 20250307;
+
 /// What to run.
 #[derive(Debug, Clone)]
 pub struct BenchOptions {
@@ -92,7 +95,7 @@ impl BenchOptions {
             quick,
             only: Vec::new(),
             datasets,
-            seed: 20250307,
+            seed: DEFAULT_SEED,
             membrane: Config::defaults()?.membrane,
         })
     }

@@ -14,6 +14,7 @@ pub fn run(
     only: &[String],
     datasets: Option<PathBuf>,
     membrane: MembraneConfig,
+    seed: u64,
 ) -> Result<()> {
     let datasets = datasets.or_else(default_datasets);
     match &datasets {
@@ -28,6 +29,7 @@ pub fn run(
     let mut opts =
         BenchOptions::new(quick, datasets).context("loading the default configuration")?;
     opts.membrane = membrane;
+    opts.seed = seed;
     opts.only = only
         .iter()
         .flat_map(|o| o.split(','))

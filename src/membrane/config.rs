@@ -101,6 +101,9 @@ pub struct MembraneConfig {
     pub band_outer_delta: f64,
     /// Accept a boundary only where the inner region is the denser one (μ1 ≥ μ2).
     pub inside_denser: bool,
+    /// Smallest inner region `r1` of an accepted boundary, as a fraction of
+    /// the search depth `M_d` (0 = any boundary; needs `inside_denser`).
+    pub inner_margin: f64,
     /// Dense-side significance: the band must hold this fraction of the
     /// expected surface count `M_w·M_h/δ²`.
     pub significance: f64,
@@ -178,6 +181,7 @@ impl Default for MembraneConfig {
             band_inner_delta: 2.0,
             band_outer_delta: 1.0,
             inside_denser: true,
+            inner_margin: 0.25,
             significance: 0.3,
             median_filter: true,
             sparse_warm_search: true,

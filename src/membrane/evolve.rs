@@ -3,11 +3,20 @@
 //!
 //! Each iteration samples the surface on the grid of Eq. 14, runs the
 //! oriented separability search (Eq. 7 / Eq. 9) along every sample's outward
-//! normal, turns the profile into a shift (inner-side-denser rule, dense-side
-//! significance, median of the offsets in a band around `t*`, gated inward
-//! force), median-filters the shifts over the 3×3 sample neighbourhood, moves
+//! normal, turns the profile into a shift (inner-side-denser rule with an
+//! inner margin, dense-side significance, median of the offsets in a band
+//! around `t*`, gated inward force), median-filters the shifts over the 3×3 sample neighbourhood, moves
 //! the samples by `β·shift` and refits the control net. `η_g` is the mean of
 //! the per-sample accepted maxima `η*`.
+//!
+//! The inner margin (`inner_margin`) admits only boundaries whose inner
+//! region is at least a fixed fraction of the cuboid's depth. Eq. 7 rewards a
+//! thin `r1` that a layer fills almost completely, so a layer just inside the
+//! cuboid's inner end could outscore the layer a sample sits on: as the
+//! decaying depth passed the thickness of a thin wall, samples on one face
+//! jumped to the other one and the membrane crumpled inside the wall (the
+//! bowl: F 0.74 on clean points against 0.92 with noise, whose thicker layer
+//! the cuboid's end cuts).
 //!
 //! The gated inward force acts on samples with no significant boundary that
 //! lie in empty space outside the object ([`OutsideGrid`]). It moves a
@@ -102,6 +111,9 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), MembraneError> {
         if !pos(v) {
             return bad(k, "must be a positive length");
         }
+    }
+    if !(cfg.inner_margin >= 0.0 && cfg.inner_margin < 0.5) {
+        return bad("inner_margin", "must be in [0, 0.5)");
     }
     if !(cfg.depth_decay > 0.0 && cfg.depth_decay <= 1.0) {
         return bad("depth_decay", "must be in (0, 1]");
@@ -313,7 +325,9 @@ impl Stepper<'_> {
             cub = cub.with_tangent(sp.su);
         }
         let rule = if cfg.inside_denser {
-            BestRule::InnerDenser
+            BestRule::InnerDenser {
+                min_inner: cfg.inner_margin * depth,
+            }
         } else {
             BestRule::Any
         };

@@ -219,7 +219,7 @@ pub struct BoundaryStats {
 }
 
 /// Which boundaries may be reported as the best one.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum BestRule {
     /// Every boundary: the plain argmax of η.
     #[default]
@@ -227,7 +227,17 @@ pub enum BestRule {
     /// Only boundaries whose inner side is at least as dense as the outer
     /// one (`μ1 ≥ μ2`): the membrane's inside-denser rule, which keeps the
     /// search from locking onto the outer face of a neighbouring layer.
-    InnerDenser,
+    ///
+    /// `min_inner` (a length, 0 = none) also skips boundaries whose inner
+    /// region `r1` is thinner than it. A layer at the far inner end of the
+    /// cuboid fills such a thin `r1` almost completely, and its η_p can then
+    /// beat the layer the sample sits on: with a second layer (the other face
+    /// of a thin wall) just inside the cuboid's end, the Fisher ratio of a
+    /// full thin slab against a sparse rest exceeds that of the true boundary.
+    InnerDenser {
+        /// Smallest thickness of the inner region `r1` of an admitted boundary.
+        min_inner: f64,
+    },
 }
 
 /// The argmax of a profile.
@@ -647,7 +657,9 @@ impl<'a> Searcher<'a> {
             };
             let admitted = match rule {
                 BestRule::Any => true,
-                BestRule::InnerDenser => stats.mu1 >= stats.mu2,
+                BestRule::InnerDenser { min_inner } => {
+                    stats.mu1 >= stats.mu2 && offset + scratch.half_depth >= min_inner
+                }
             };
             if admitted && stats.eta > 0.0 && best.is_none_or(|b| stats.eta > b.eta) {
                 best = Some(Best {
@@ -698,8 +710,14 @@ impl<'a> Searcher<'a> {
                 && match rule {
                     BestRule::Any => true,
                     // μ1 ≥ μ2, i.e. not (o1/n1 < o2/n2).
-                    BestRule::InnerDenser if exact => fo1 * n2 >= fo2 * n1,
-                    BestRule::InnerDenser => fo1 / n1 >= fo2 / n2,
+                    BestRule::InnerDenser { min_inner } => {
+                        Self::offset(scratch, k) + scratch.half_depth >= min_inner
+                            && if exact {
+                                fo1 * n2 >= fo2 * n1
+                            } else {
+                                fo1 / n1 >= fo2 / n2
+                            }
+                    }
                 };
             let key = match (admitted, exact) {
                 (false, _) => [-1.0, 1.0],
@@ -962,15 +980,48 @@ mod tests {
         assert!((down.offset - 0.05).abs() <= dw + 1e-9, "{down:?}");
     }
 
-    /// The first largest positive η of the profile among the boundaries `rule` admits.
-    fn scan(profile: &[BoundaryStats], rule: BestRule) -> Option<(usize, f64, f64)> {
+    #[test]
+    fn inner_margin_keeps_a_sample_on_its_face_of_a_thin_wall() {
+        // A thin wall: faces at z = 0 (where the sample sits, normal +z) and
+        // z = −0.09, just inside the cuboid's inner end (half depth 0.1).
+        let mut pts = sheet(0.0, 0.02);
+        pts.extend(sheet(-0.09, 0.02));
+        let idx = SpatialIndex::new(&pts).unwrap();
+        let s = Searcher::new(&idx, Delta::Global(0.02), 30).unwrap();
+        let mut scratch = SearchScratch::new();
+        let cub = Cuboid::new(Vec3::new(0.0, 0.0, 0.001), Vec3::z(), 0.2, 0.2, 0.2);
+        let best = |min_inner: f64, scratch: &mut SearchScratch| {
+            s.search_best(&cub, BestRule::InnerDenser { min_inner }, scratch)
+                .unwrap()
+                .best
+                .unwrap()
+        };
+        // Without a margin the full thin slab at the far end wins: the
+        // sample would jump through the wall.
+        let jump = best(0.0, &mut scratch);
+        assert!(jump.offset < -0.07, "{jump:?}");
+        // With r1 at least a quarter of the depth, the face it sits on wins.
+        let stay = best(0.25 * cub.depth, &mut scratch);
+        assert!(stay.offset.abs() < 0.02, "{stay:?}");
+        assert!(stay.eta > 0.0);
+    }
+
+    /// The first largest positive η of the profile among the boundaries
+    /// `rule` admits (`half_depth`: half the cuboid's depth).
+    fn scan(
+        profile: &[BoundaryStats],
+        rule: BestRule,
+        half_depth: f64,
+    ) -> Option<(usize, f64, f64)> {
         let mut best: Option<(usize, f64, f64)> = None;
         for (k, st) in profile.iter().enumerate() {
             if st.eta <= best.map_or(0.0, |b| b.2) {
                 continue;
             }
-            if rule == BestRule::InnerDenser && st.mu1 < st.mu2 {
-                continue;
+            if let BestRule::InnerDenser { min_inner } = rule {
+                if st.mu1 < st.mu2 || st.offset + half_depth < min_inner {
+                    continue;
+                }
             }
             best = Some((k, st.offset, st.eta));
         }
@@ -1042,12 +1093,19 @@ mod tests {
                 rng.random_range(0.1..0.8),
             );
             let a = s.search(&cub, &mut full).unwrap();
-            for rule in [BestRule::Any, BestRule::InnerDenser] {
+            let margin = BestRule::InnerDenser {
+                min_inner: cub.depth * [0.1, 0.25, 0.4][q % 3],
+            };
+            for rule in [
+                BestRule::Any,
+                BestRule::InnerDenser { min_inner: 0.0 },
+                margin,
+            ] {
                 let b = s.search_best(&cub, rule, &mut lean).unwrap();
                 assert_eq!((a.gathered, a.delta), (b.gathered, b.delta));
                 assert_eq!(full.offsets(), lean.offsets());
                 assert_eq!(full.slab_counts(), lean.slab_counts());
-                let want = scan(full.profile(), rule);
+                let want = scan(full.profile(), rule, cub.depth / 2.0);
                 let got = b.best.map(|x| (x.boundary, x.offset, x.eta));
                 assert_eq!(got, want, "query {q} rule {rule:?}");
                 if rule == BestRule::Any {
