@@ -143,17 +143,17 @@ fn sphere_converges() {
 }
 
 /// A thick-walled bowl (unit longest edge) from 20,000 clean surface points,
-/// four samplings: the membrane must go some way into the bowl's hollow.
-/// Measured over ten samplings of `sepmem::metrics::sample_surface`: mean F
-/// 0.73 (0.69–0.77) with the default δ, 0.63 (0.52–0.71) with δ as the plain
-/// median k-NN distance (`delta_quantile` 0.5, `delta_scale` 1.0), where the
-/// membrane tangles in the wall instead.
+/// four samplings: the membrane must fill the bowl's hollow. Mean F 0.995
+/// (0.981–1.000); 0.827 with `inner_margin` 0 (samples jump through the
+/// wall to its other face and the membrane crumples there), 0.805 without
+/// the cavity case of the inward force (the cap that descended into the
+/// hollow stalls below the centroid), 0.75 with neither.
 #[test]
 fn bowl_hollow_is_entered_on_clean_points() {
     let gt = sepmem::shapes::bowl(96).unwrap().mesh;
     let (fs, mean) = clean_samplings_f(&gt, 4);
     eprintln!("bowl: F {fs:.3?}, mean {mean:.3}");
-    assert!(mean >= 0.68, "bowl mean F = {mean} ({fs:?})");
+    assert!(mean >= 0.93, "bowl mean F = {mean} ({fs:?})");
 }
 
 /// Spot the cow (K. Crane, public domain; unit longest edge) from 20,000

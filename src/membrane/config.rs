@@ -113,8 +113,9 @@ pub struct MembraneConfig {
     /// (alternating) and give the other half their neighbours' result.
     pub sparse_warm_search: bool,
     /// Gated inward force where the occupancy grid says the sample is
-    /// outside: against the normal, or along it for a folded-over pocket
-    /// whose normal faces the object.
+    /// outside: against the normal, or, where the normal faces the centroid,
+    /// toward the solid space its normal line meets (along it for a
+    /// folded-over pocket, against it for a sheet hanging in a cavity).
     pub inward_force: bool,
     /// Voxel edge of the occupancy grid, in multiples of δ.
     pub inward_voxel_delta: f64,
