@@ -117,6 +117,11 @@ pub struct MembraneConfig {
     /// toward the solid space its normal line meets (along it for a
     /// folded-over pocket, against it for a sheet hanging in a cavity).
     pub inward_force: bool,
+    /// Tension near the poles on samples without a data force: the fraction
+    /// of the normal step to their neighbours' mean they move (0 = off).
+    pub pole_tension: f64,
+    /// Sample rows next to each pole where `pole_tension` acts.
+    pub pole_tension_rows: usize,
     /// Voxel edge of the occupancy grid, in multiples of δ.
     pub inward_voxel_delta: f64,
     /// Points in a voxel's 3×3×3 neighbourhood for it to be occupied.
@@ -187,6 +192,8 @@ impl Default for MembraneConfig {
             median_filter: true,
             sparse_warm_search: true,
             inward_force: true,
+            pole_tension: 1.0,
+            pole_tension_rows: 6,
             inward_voxel_delta: 2.0,
             inward_min_points: 20,
             inward_step: 0.5,

@@ -18,6 +18,12 @@
 //! bowl: F 0.74 on clean points against 0.92 with noise, whose thicker layer
 //! the cuboid's end cuts).
 //!
+//! Near the poles, samples without a data force get a membrane tension
+//! (`pole_tension`): the normal component of the step to their grid
+//! neighbours' mean. A pole caught in a thick shell of outliers otherwise
+//! stays out as a thin horn that no search sees, because its samples' normals
+//! point across it.
+//!
 //! The gated inward force acts on samples with no significant boundary that
 //! lie in empty space outside the object ([`OutsideGrid`]). It moves a
 //! sample by `−inward_step·depth` along its normal when the normal faces
@@ -116,6 +122,9 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), MembraneError> {
         if !pos(v) {
             return bad(k, "must be a positive length");
         }
+    }
+    if !(cfg.pole_tension >= 0.0 && cfg.pole_tension <= 1.0) {
+        return bad("pole_tension", "must be in [0, 1]");
     }
     if !(cfg.inner_margin >= 0.0 && cfg.inner_margin < 0.5) {
         return bad("inner_margin", "must be in [0, 0.5)");
@@ -583,6 +592,45 @@ fn median_of_few(s: &mut [f64]) -> f64 {
 
 /// Median of the shifts of moving samples in each 3×3 neighbourhood
 /// (periodic in u, clamped in v); samples that do not move stay put.
+/// Membrane tension near the poles: each sample of the first and last
+/// `rows` sample rows that has no data force (state 0) gets, as its shift,
+/// `tension` times the normal component of the step to the mean of its four
+/// grid neighbours (for the rows next to a pole, the sample across the pole
+/// stands in for the missing neighbour). Writes into `shifts`.
+fn pole_tension(
+    outs: &[SampleOut],
+    un: usize,
+    vn: usize,
+    tension: f64,
+    rows: usize,
+    shifts: &mut [f64],
+) {
+    for j in 0..vn {
+        if j >= rows && j + rows < vn {
+            continue;
+        }
+        for i in 0..un {
+            let k = j * un + i;
+            let o = &outs[k];
+            if o.state != 0 {
+                continue;
+            }
+            let left = if i == 0 { un - 1 } else { i - 1 };
+            let right = if i + 1 == un { 0 } else { i + 1 };
+            let across = (i + un / 2) % un;
+            let up = if j == 0 { across } else { k - un };
+            let down = if j + 1 == vn {
+                (vn - 1) * un + across
+            } else {
+                k + un
+            };
+            let q =
+                (outs[j * un + left].p + outs[j * un + right].p + outs[up].p + outs[down].p) / 4.0;
+            shifts[k] = tension * (q - o.p).dot(&o.n);
+        }
+    }
+}
+
 fn median_filter(outs: &[SampleOut], un: usize, vn: usize, shifts: &mut Vec<f64>) {
     shifts.resize(outs.len(), 0.0);
     let mut buf = [0.0f64; 9];
@@ -1017,6 +1065,18 @@ pub(crate) fn run(
         } else {
             shifts.clear();
             shifts.extend(outs.iter().map(|o| o.shift));
+        }
+        // Pole tension (whole objects only: the unseen back of a single view
+        // is held where it is).
+        if cfg.pole_tension > 0.0 && view.is_none() {
+            pole_tension(
+                &outs,
+                layout.u_n(),
+                layout.v_n(),
+                cfg.pole_tension,
+                cfg.pole_tension_rows,
+                &mut shifts,
+            );
         }
         targets.clear();
         targets.extend(
