@@ -112,6 +112,10 @@ pub struct MembraneConfig {
     /// Warm-started iterations search a checkerboard half of the samples
     /// (alternating) and give the other half their neighbours' result.
     pub sparse_warm_search: bool,
+    /// The same checkerboard search for cold reconstructions of whole
+    /// objects (no single view) once the grid has reached its maximum, for
+    /// clouds with at least as many points as the grid has samples.
+    pub sparse_cold_search: bool,
     /// Gated inward force where the occupancy grid says the sample is
     /// outside: against the normal, or, where the normal faces the centroid,
     /// toward the solid space its normal line meets (along it for a
@@ -191,6 +195,7 @@ impl Default for MembraneConfig {
             significance: 0.3,
             median_filter: true,
             sparse_warm_search: true,
+            sparse_cold_search: true,
             inward_force: true,
             pole_tension: 1.0,
             pole_tension_rows: 6,

@@ -1040,10 +1040,18 @@ pub(crate) fn run(
         let fit = fits.get(cfg, m, l)?;
         let layout = fit.layout().clone();
         let t_search = Instant::now();
-        // Sparse warm search: a checkerboard half of the samples, the half
-        // alternating from iteration to iteration (and frame to frame).
-        let skip = (cfg.sparse_warm_search && warm.is_some())
-            .then(|| (it + warm.map_or(0, |w| w.phase)) % 2);
+        // Sparse search: a checkerboard half of the samples, the half
+        // alternating from iteration to iteration (and frame to frame); for
+        // warm starts, and for whole objects on the final grid.
+        let sparse = if warm.is_some() {
+            cfg.sparse_warm_search
+        } else {
+            cfg.sparse_cold_search
+                && view.is_none()
+                && [m, l] == max_grid
+                && points.len() >= layout.len()
+        };
+        let skip = sparse.then(|| (it + warm.map_or(0, |w| w.phase)) % 2);
         stepper.search_all(
             &surface,
             &layout,
