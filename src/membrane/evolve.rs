@@ -18,6 +18,12 @@
 //! bowl: F 0.74 on clean points against 0.92 with noise, whose thicker layer
 //! the cuboid's end cuts).
 //!
+//! Warm starts, and cold whole-object reconstructions on the final grid of a
+//! cloud at least as dense as the samples, search a checkerboard half of
+//! the samples per iteration (alternating); the other half take their
+//! searched neighbours' median shift (`sparse_warm_search`,
+//! `sparse_cold_search`).
+//!
 //! Near the poles, samples without a data force get a membrane tension
 //! (`pole_tension`): the normal component of the step to their grid
 //! neighbours' mean. A pole caught in a thick shell of outliers otherwise
