@@ -126,6 +126,9 @@ pub struct MembraneConfig {
     pub pole_tension: f64,
     /// Sample rows next to each pole where `pole_tension` acts.
     pub pole_tension_rows: usize,
+    /// Warm-started single views: smoothing of the occluded back without a
+    /// data force (the fraction of the mean-free umbrella step; 0 = off).
+    pub warm_back_smoothing: f64,
     /// Voxel edge of the occupancy grid, in multiples of δ.
     pub inward_voxel_delta: f64,
     /// Points in a voxel's 3×3×3 neighbourhood for it to be occupied.
@@ -199,6 +202,7 @@ impl Default for MembraneConfig {
             inward_force: true,
             pole_tension: 1.0,
             pole_tension_rows: 6,
+            warm_back_smoothing: 0.5,
             inward_voxel_delta: 2.0,
             inward_min_points: 20,
             inward_step: 0.5,

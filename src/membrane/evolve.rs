@@ -30,6 +30,10 @@
 //! stays out as a thin horn that no search sees, because its samples' normals
 //! point across it.
 //!
+//! A warm-started single view smooths its occluded back (`warm_back_smoothing`):
+//! samples behind the seen surface with no data force move by the mean-free
+//! umbrella step, so dents carried over from earlier frames fade.
+//!
 //! The gated inward force acts on samples with no significant boundary that
 //! lie in empty space outside the object ([`OutsideGrid`]). It moves a
 //! sample by `−inward_step·depth` along its normal when the normal faces
@@ -131,6 +135,9 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), MembraneError> {
     }
     if !(cfg.pole_tension >= 0.0 && cfg.pole_tension <= 1.0) {
         return bad("pole_tension", "must be in [0, 1]");
+    }
+    if !(cfg.warm_back_smoothing >= 0.0 && cfg.warm_back_smoothing <= 1.0) {
+        return bad("warm_back_smoothing", "must be in [0, 1]");
     }
     if !(cfg.inner_margin >= 0.0 && cfg.inner_margin < 0.5) {
         return bad("inner_margin", "must be in [0, 0.5)");
@@ -617,23 +624,60 @@ fn pole_tension(
         }
         for i in 0..un {
             let k = j * un + i;
-            let o = &outs[k];
-            if o.state != 0 {
-                continue;
+            if outs[k].state == 0 {
+                shifts[k] = tension * umbrella(outs, un, vn, i, j);
             }
-            let left = if i == 0 { un - 1 } else { i - 1 };
-            let right = if i + 1 == un { 0 } else { i + 1 };
-            let across = (i + un / 2) % un;
-            let up = if j == 0 { across } else { k - un };
-            let down = if j + 1 == vn {
-                (vn - 1) * un + across
-            } else {
-                k + un
-            };
-            let q =
-                (outs[j * un + left].p + outs[j * un + right].p + outs[up].p + outs[down].p) / 4.0;
-            shifts[k] = tension * (q - o.p).dot(&o.n);
         }
+    }
+}
+
+/// Normal component of the step from sample `(i, j)` to the mean of its four
+/// grid neighbours (periodic in u; for the rows next to a pole, the sample
+/// across the pole stands in for the missing neighbour).
+fn umbrella(outs: &[SampleOut], un: usize, vn: usize, i: usize, j: usize) -> f64 {
+    let k = j * un + i;
+    let left = if i == 0 { un - 1 } else { i - 1 };
+    let right = if i + 1 == un { 0 } else { i + 1 };
+    let across = (i + un / 2) % un;
+    let up = if j == 0 { across } else { k - un };
+    let down = if j + 1 == vn {
+        (vn - 1) * un + across
+    } else {
+        k + un
+    };
+    let q = (outs[j * un + left].p + outs[j * un + right].p + outs[up].p + outs[down].p) / 4.0;
+    (q - outs[k].p).dot(&outs[k].n)
+}
+
+/// Smoothing of a warm-started single view's occluded back: every sample
+/// without a data force that lies behind the seen surface moves `weight`
+/// times its [`umbrella`] step minus the mean step of all such samples, so
+/// dents carried over from earlier frames fade while the back as a whole
+/// neither shrinks nor grows. `sel` is a reused buffer.
+fn smooth_occluded_back(
+    outs: &[SampleOut],
+    un: usize,
+    vn: usize,
+    vb: &view::ViewBuffer,
+    weight: f64,
+    sel: &mut Vec<(usize, f64)>,
+    shifts: &mut [f64],
+) {
+    sel.clear();
+    for j in 0..vn {
+        for i in 0..un {
+            let o = &outs[j * un + i];
+            if o.state == 0 && vb.is_occluded(&o.p) {
+                sel.push((j * un + i, umbrella(outs, un, vn, i, j)));
+            }
+        }
+    }
+    if sel.is_empty() {
+        return;
+    }
+    let mean = sel.iter().map(|s| s.1).sum::<f64>() / sel.len() as f64;
+    for &(k, step) in sel.iter() {
+        shifts[k] = weight * (step - mean);
     }
 }
 
@@ -1004,6 +1048,7 @@ pub(crate) fn run(
     let mut shifts: Vec<f64> = Vec::new();
     let mut targets: Vec<Vec3> = Vec::new();
     let mut moving: Vec<f64> = Vec::new();
+    let mut back: Vec<(usize, f64)> = Vec::new();
     let mut eta_hist: Vec<f64> = Vec::new();
     let mut grids: Vec<[usize; 2]> = Vec::new();
     let mut iteration_ms: Vec<f64> = Vec::new();
@@ -1089,6 +1134,17 @@ pub(crate) fn run(
                 layout.v_n(),
                 cfg.pole_tension,
                 cfg.pole_tension_rows,
+                &mut shifts,
+            );
+        }
+        if let (Some(vb), true) = (&view, warm.is_some() && cfg.warm_back_smoothing > 0.0) {
+            smooth_occluded_back(
+                &outs,
+                layout.u_n(),
+                layout.v_n(),
+                vb,
+                cfg.warm_back_smoothing,
+                &mut back,
                 &mut shifts,
             );
         }
@@ -1229,6 +1285,63 @@ mod tests {
             state,
             ..SampleOut::default()
         }
+    }
+
+    #[test]
+    fn occluded_back_smoothing_lifts_a_dent_without_moving_the_back_as_a_whole() {
+        // The camera at the origin sees a sheet at z = 1; the back samples
+        // lie behind it on a curved patch z = 1.2 + 3(x² + y²) (normals +z,
+        // away from the camera: plain smoothing would move the patch as a
+        // whole), one of them dented 0.1 toward the camera.
+        let mut seen = Vec::new();
+        for a in -20..=20 {
+            for b in -20..=20 {
+                seen.push(Vec3::new(a as f64 * 0.01, b as f64 * 0.01, 1.0));
+            }
+        }
+        let vb = view::ViewBuffer::new(&seen, Vec3::zeros(), 0.01).unwrap();
+        let (un, vn) = (8, 6);
+        let mut outs = vec![SampleOut::default(); un * vn];
+        for j in 0..vn {
+            for i in 0..un {
+                let (x, y) = (i as f64 * 0.02 - 0.07, j as f64 * 0.02 - 0.05);
+                let dent = if (i, j) == (3, 2) { 0.1 } else { 0.0 };
+                outs[j * un + i] = SampleOut {
+                    p: Vec3::new(x, y, 1.2 + 3.0 * (x * x + y * y) - dent),
+                    n: Vec3::z(),
+                    ..SampleOut::default()
+                };
+            }
+        }
+        // A sample with a data force keeps its shift.
+        outs[0].state = 1;
+        outs[0].shift = 0.5;
+        let mut shifts: Vec<f64> = outs.iter().map(|o| o.shift).collect();
+        let mut sel = Vec::new();
+        smooth_occluded_back(&outs, un, vn, &vb, 1.0, &mut sel, &mut shifts);
+        assert_eq!(shifts[0], 0.5);
+        let dent = shifts[2 * un + 3];
+        assert!(dent > 0.08, "the dent moves back out: {dent}");
+        assert!(shifts[2 * un + 2] < 0.0, "its neighbours move in a little");
+        let raw: f64 = (1..un * vn)
+            .map(|k| umbrella(&outs, un, vn, k % un, k / un))
+            .sum();
+        assert!(
+            raw.abs() > 0.005,
+            "plain umbrella steps would move the back: {raw}"
+        );
+        let sum: f64 = shifts[1..].iter().sum();
+        assert!(sum.abs() < 1e-12, "the back as a whole stays: {sum}");
+        // Samples in front of the seen sheet are not smoothed.
+        let mut front = outs.clone();
+        for o in &mut front {
+            o.p.z = 0.5;
+            o.state = 0;
+        }
+        front[2 * un + 3].p.z = 0.4;
+        let mut shifts = vec![0.0; un * vn];
+        smooth_occluded_back(&front, un, vn, &vb, 1.0, &mut sel, &mut shifts);
+        assert!(shifts.iter().all(|&s| s == 0.0));
     }
 
     #[test]
