@@ -5,9 +5,9 @@
 //! oriented separability search (Eq. 7 / Eq. 9) along every sample's outward
 //! normal, turns the profile into a shift (inner-side-denser rule with an
 //! inner margin, dense-side significance, median of the offsets in a band
-//! around `t*`, gated inward force), median-filters the shifts over the 3×3 sample neighbourhood, moves
-//! the samples by `β·shift` and refits the control net. `η_g` is the mean of
-//! the per-sample accepted maxima `η*`.
+//! around `t*`, gated inward force), median-filters the shifts over the 3×3
+//! sample neighbourhood, moves the samples by `β·shift` and refits the
+//! control net. `η_g` is the mean of the per-sample accepted maxima `η*`.
 //!
 //! The inner margin (`inner_margin`) admits only boundaries whose inner
 //! region is at least a fixed fraction of the cuboid's depth. Eq. 7 rewards a
@@ -30,9 +30,10 @@
 //! stays out as a thin horn that no search sees, because its samples' normals
 //! point across it.
 //!
-//! A warm-started single view smooths its occluded back (`warm_back_smoothing`):
-//! samples behind the seen surface with no data force move by the mean-free
-//! umbrella step, so dents carried over from earlier frames fade.
+//! A warm-started single view smooths its occluded back
+//! (`warm_back_smoothing`): samples behind the seen surface with no data
+//! force move by the mean-free umbrella step, so dents carried over from
+//! earlier frames fade.
 //!
 //! The gated inward force acts on samples with no significant boundary that
 //! lie in empty space outside the object ([`OutsideGrid`]). It moves a
@@ -50,10 +51,10 @@
 //! part (Table 1: Spot F 0.75 → 0.88, Fandisk 0.78 → 0.85, hammer 0.69 →
 //! 0.84); the second took the bowl from 0.90 to 0.98 (genus-0 F 0.929 →
 //! 0.935; the procedural torus 0.926 → 0.906, whose hole caps it moves on
-//! a little further). A single view keeps the
-//! withholding rule: there the fold rule raised the F-score of cold frames
-//! but set warm-started frames off course (synth bottle sequence: warm frames
-//! within 0.01 of cold 19/19 → 9/19).
+//! a little further). A single view keeps the withholding rule: there the
+//! fold rule raised the F-score of cold frames but set warm-started frames
+//! off course (synth bottle sequence: warm frames within 0.01 of cold 19/19
+//! → 9/19).
 
 use super::config::MembraneConfig;
 use super::extract::extract_mesh;
@@ -450,7 +451,8 @@ impl Stepper<'_> {
             Some(g) if self.view.is_none() => g,
             _ => return 0.0,
         };
-        // Only a front hit can move the sample; the back ray runs only then.
+        // The back ray runs only as far as a front hit, or the full reach
+        // when there is none.
         match grid.distance_to_solid(p, n, self.reach) {
             // Solid in front, none nearer behind: a folded-over pocket.
             Some(f) if grid.distance_to_solid(p, &(-n), f).is_none() => -1.0,
@@ -603,8 +605,6 @@ fn median_of_few(s: &mut [f64]) -> f64 {
     }
 }
 
-/// Median of the shifts of moving samples in each 3×3 neighbourhood
-/// (periodic in u, clamped in v); samples that do not move stay put.
 /// Membrane tension near the poles: each sample of the first and last
 /// `rows` sample rows that has no data force (state 0) gets, as its shift,
 /// `tension` times the normal component of the step to the mean of its four
@@ -681,6 +681,8 @@ fn smooth_occluded_back(
     }
 }
 
+/// Median of the shifts of moving samples in each 3×3 neighbourhood
+/// (periodic in u, clamped in v); samples that do not move stay put.
 fn median_filter(outs: &[SampleOut], un: usize, vn: usize, shifts: &mut Vec<f64>) {
     shifts.resize(outs.len(), 0.0);
     let mut buf = [0.0f64; 9];
