@@ -191,25 +191,14 @@ fn ellipsoid_converges() {
 /// The paper's robustness sweep on a unit-diameter sphere: 1,000 surface
 /// points (sampling `seed`) plus 1,000 duplicates perturbed with N(0, σ²)
 /// per coordinate. Returns the F-score of the reconstruction.
-fn sphere_with_duplicates_f(sigma: f64, seed: u64, cfg: &MembraneConfig) -> f64 {
+fn sphere_with_duplicates_f(sigma: f64, seed: u64) -> f64 {
     let a = Vec3::repeat(0.5);
-    let mut pts = ellipsoid(1_000, a, Vec3::zeros(), seed);
+    let surface = ellipsoid(1_000, a, Vec3::zeros(), seed);
     let mut rng = ChaCha8Rng::seed_from_u64(seed + 1);
-    let noise = Normal::new(0.0, sigma).unwrap();
-    let dup: Vec<Vec3> = pts
-        .iter()
-        .map(|p| {
-            p + Vec3::new(
-                noise.sample(&mut rng),
-                noise.sample(&mut rng),
-                noise.sample(&mut rng),
-            )
-        })
-        .collect();
-    pts.extend(dup);
+    let pts = sepmem::bench::clouds::with_perturbed_duplicates(&surface, sigma, &mut rng);
     let rec = reconstruct(
         &PointCloud::from_points(pts),
-        cfg,
+        &serial(),
         &Budget::unlimited(),
         None,
     )
@@ -227,7 +216,7 @@ fn sphere_with_duplicates_f(sigma: f64, seed: u64, cfg: &MembraneConfig) -> f64 
 fn sphere_with_outliers_sigma_02() {
     // Measured F 0.966 with δ from the lower quartile of d_i (0.92 with the
     // median).
-    let f = sphere_with_duplicates_f(0.2, 3, &serial());
+    let f = sphere_with_duplicates_f(0.2, 3);
     assert!(f >= 0.95, "sphere+outliers F = {f}");
 }
 
@@ -237,7 +226,7 @@ fn sphere_with_outliers_sigma_02() {
 #[test]
 fn sphere_sweep_sigma_01_poles_are_not_left_as_horns() {
     let fs: Vec<f64> = (10..14)
-        .map(|seed| sphere_with_duplicates_f(0.1, seed, &serial()))
+        .map(|seed| sphere_with_duplicates_f(0.1, seed))
         .collect();
     let mean = fs.iter().sum::<f64>() / fs.len() as f64;
     eprintln!("sphere sigma 0.1: F {fs:.3?}, mean {mean:.3}");

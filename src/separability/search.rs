@@ -577,6 +577,13 @@ impl<'a> Searcher<'a> {
         [fo1, b1, fo2, b2]
     }
 
+    /// Thickness of the inner region `r1` of boundary `k` (`t_k` from the
+    /// cuboid's inner end), as [`BestRule::InnerDenser`] compares it.
+    #[inline]
+    fn inner_thickness(scratch: &SearchScratch, k: usize) -> f64 {
+        Self::offset(scratch, k) + scratch.half_depth
+    }
+
     /// Offset `t_k` of boundary `k`.
     #[inline]
     fn offset(scratch: &SearchScratch, k: usize) -> f64 {
@@ -658,7 +665,7 @@ impl<'a> Searcher<'a> {
             let admitted = match rule {
                 BestRule::Any => true,
                 BestRule::InnerDenser { min_inner } => {
-                    stats.mu1 >= stats.mu2 && offset + scratch.half_depth >= min_inner
+                    stats.mu1 >= stats.mu2 && Self::inner_thickness(scratch, k) >= min_inner
                 }
             };
             if admitted && stats.eta > 0.0 && best.is_none_or(|b| stats.eta > b.eta) {
@@ -711,7 +718,7 @@ impl<'a> Searcher<'a> {
                     BestRule::Any => true,
                     // μ1 ≥ μ2, i.e. not (o1/n1 < o2/n2).
                     BestRule::InnerDenser { min_inner } => {
-                        Self::offset(scratch, k) + scratch.half_depth >= min_inner
+                        Self::inner_thickness(scratch, k) >= min_inner
                             && if exact {
                                 fo1 * n2 >= fo2 * n1
                             } else {
