@@ -156,6 +156,43 @@ fn bowl_hollow_is_entered_on_clean_points() {
     assert!(mean >= 0.93, "bowl mean F = {mean} ({fs:?})");
 }
 
+/// The procedural mug (genus 1, unit longest edge) from 20,000 clean
+/// points, two samplings, with and without the sample redistribution along
+/// the rings. The poles lie on the mug's short horizontal axis, so the sheet
+/// that pushes into the cup spans the rings; without redistribution its few
+/// columns stall in a coarse V halfway down. Measured: mean F 0.769 with,
+/// 0.732 without.
+#[test]
+fn mug_cavity_gets_samples_from_the_ring_redistribution() {
+    let gt = sepmem::shapes::mug(128).unwrap().mesh;
+    let dense = sample_mesh(&gt, 100_000, 98);
+    let run = |stretch: f64| -> f64 {
+        let cfg = MembraneConfig {
+            redistribute_stretch: stretch,
+            ..serial()
+        };
+        (1..=2)
+            .map(|seed| {
+                let cloud = PointCloud::from_points(sample_mesh(&gt, 20_000, seed));
+                let rec = reconstruct(&cloud, &cfg, &Budget::unlimited(), None).unwrap();
+                check_mesh(&rec.mesh);
+                score(&rec.mesh, &dense)
+            })
+            .sum::<f64>()
+            / 2.0
+    };
+    let (on, off) = (
+        run(MembraneConfig::default().redistribute_stretch),
+        run(0.0),
+    );
+    eprintln!("mug: mean F {on:.3} with redistribution, {off:.3} without");
+    assert!(
+        on >= 0.75,
+        "mug mean F = {on} (without redistribution {off})"
+    );
+    assert!(on >= off + 0.015, "redistribution: mug F {off} -> {on}");
+}
+
 /// Spot the cow (K. Crane, public domain; unit longest edge) from 20,000
 /// clean points, two samplings. Wrapping the legs folds parts of the
 /// membrane over (their normals turn to face the object) in the empty space

@@ -116,6 +116,9 @@ pub struct MembraneConfig {
     /// objects (no single view) once the grid has reached its maximum, for
     /// clouds with at least as many points as the grid has samples.
     pub sparse_cold_search: bool,
+    /// Redistribute the samples along `u` (equal arc lengths) after a refit
+    /// when the ring stretch exceeds this ratio (0 = off; whole objects).
+    pub redistribute_stretch: f64,
     /// Gated inward force where the occupancy grid says the sample is
     /// outside: against the normal, or, where the normal faces the centroid,
     /// toward the solid space its normal line meets (along it for a
@@ -199,6 +202,7 @@ impl Default for MembraneConfig {
             median_filter: true,
             sparse_warm_search: true,
             sparse_cold_search: true,
+            redistribute_stretch: 1.3,
             inward_force: true,
             pole_tension: 1.0,
             pole_tension_rows: 6,

@@ -30,6 +30,14 @@
 //! stays out as a thin horn that no search sees, because its samples' normals
 //! point across it.
 //!
+//! Whole objects redistribute their samples along the rings
+//! (`redistribute_stretch`): the sample grid is fixed in `(u, v)`, so where
+//! the membrane stretches (a sheet pushed into a cavity whose opening lies
+//! across the rings) its samples and control columns thin out and the sheet
+//! stalls in a coarse V. When a ring's largest arc length per unit `u`
+//! exceeds `redistribute_stretch` × its mean, the refitted surface is
+//! refitted once more to itself at the arc-length parameters.
+//!
 //! A warm-started single view smooths its occluded back
 //! (`warm_back_smoothing`): samples behind the seen surface with no data
 //! force move by the mean-free umbrella step, so dents carried over from
@@ -67,7 +75,9 @@ use crate::density::{median_of, Density};
 use crate::separability::attribute::{AttributeSet, AttributeWeights, ChannelWeight};
 use crate::separability::grid::SpatialIndex;
 use crate::separability::search::{BestRule, Cuboid, Delta, SearchScratch, Searcher};
-use crate::spline::{regrid, ClosedSurface, FitSystem, Layout, SurfacePoint};
+use crate::spline::{
+    param_stretch, redistribute, regrid, ClosedSurface, FitSystem, Layout, SurfacePoint,
+};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::{Mutex, OnceLock};
@@ -78,6 +88,9 @@ const KEEP_DIV: usize = 2;
 
 /// Smallest number of points the membrane accepts.
 pub const MIN_POINTS: usize = 16;
+
+/// Rings over which the ring stretch of `redistribute_stretch` is averaged.
+const STRETCH_RINGS: usize = 16;
 
 /// Check every parameter's range.
 ///
@@ -136,6 +149,11 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), MembraneError> {
     }
     if !(cfg.pole_tension >= 0.0 && cfg.pole_tension <= 1.0) {
         return bad("pole_tension", "must be in [0, 1]");
+    }
+    if !(cfg.redistribute_stretch == 0.0
+        || (cfg.redistribute_stretch > 1.0 && cfg.redistribute_stretch.is_finite()))
+    {
+        return bad("redistribute_stretch", "must be 0 (off) or above 1");
     }
     if !(cfg.warm_back_smoothing >= 0.0 && cfg.warm_back_smoothing <= 1.0) {
         return bad("warm_back_smoothing", "must be in [0, 1]");
@@ -1051,6 +1069,7 @@ pub(crate) fn run(
     let mut targets: Vec<Vec3> = Vec::new();
     let mut moving: Vec<f64> = Vec::new();
     let mut back: Vec<(usize, f64)> = Vec::new();
+    let mut arc: Vec<f64> = Vec::new();
     let mut eta_hist: Vec<f64> = Vec::new();
     let mut grids: Vec<[usize; 2]> = Vec::new();
     let mut iteration_ms: Vec<f64> = Vec::new();
@@ -1162,6 +1181,17 @@ pub(crate) fn run(
         // a refit moves the samples by small shifts and cannot turn the
         // surface inside out.
         fit.fit(&mut surface, &targets)?;
+        // Sample redistribution along the rings (whole objects): equal u
+        // steps become equal arc lengths when the rings have stretched.
+        if cfg.redistribute_stretch > 0.0 && view.is_none() {
+            let n = 2 * layout.u_n();
+            if param_stretch(&surface, true, STRETCH_RINGS, n, &mut arc) > cfg.redistribute_stretch
+            {
+                surface = redistribute(&surface, fit, true, &arc)?;
+                // The searched η* belong to the samples before the move.
+                last_eta_grid = [0, 0];
+            }
+        }
         times.fit_ms += ms(t_fit);
         grids.push([m, l]);
         // A sparse iteration's η_g is compared with the last one that

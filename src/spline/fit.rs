@@ -260,15 +260,110 @@ pub fn regrid(
     system: &mut FitSystem,
 ) -> Result<ClosedSurface, SplineError> {
     let lay = system.layout().clone();
-    let mut targets = Vec::with_capacity(lay.len());
-    for &v in &lay.vs {
-        for &u in &lay.us {
+    let net = ClosedSurface::from_net(lay.m, lay.l, vec![Vec3::zeros(); lay.m * lay.l])?;
+    let mut out = refit_at(surface, system, net, &lay.us, &lay.vs)?;
+    out.fix_orientation();
+    Ok(out)
+}
+
+/// Parameter stretch of `surface` along `u` (`along_u`, the rings) or `v`
+/// (the meridians): the largest ratio, over `n` equal parameter intervals,
+/// of the mean arc length per unit parameter to its mean over the whole
+/// curve (1 when equal parameter steps are equal arc lengths). Lengths are
+/// averaged over `lines` rings (at `v = (k+½)/lines`) or meridians. Leaves
+/// the cumulative mean arc length at `k/n`, `k = 0..=n`, in `cum` (sized
+/// once; no allocation when it already holds `n + 1` values).
+pub fn param_stretch(
+    surface: &ClosedSurface,
+    along_u: bool,
+    lines: usize,
+    n: usize,
+    cum: &mut Vec<f64>,
+) -> f64 {
+    let (lines, n) = (lines.max(1), n.max(2));
+    let at = |line: usize, t: f64| {
+        if along_u {
+            surface.eval(t, (line as f64 + 0.5) / lines as f64).p
+        } else {
+            surface.eval(line as f64 / lines as f64, t).p
+        }
+    };
+    cum.clear();
+    cum.resize(n + 1, 0.0);
+    for line in 0..lines {
+        let mut prev = at(line, 0.0);
+        for (k, c) in cum.iter_mut().enumerate().skip(1) {
+            let p = at(line, k as f64 / n as f64);
+            *c += (p - prev).norm();
+            prev = p;
+        }
+    }
+    let mut total = 0.0;
+    let mut widest: f64 = 0.0;
+    for c in cum.iter_mut() {
+        let len = *c / lines as f64;
+        widest = widest.max(len);
+        total += len;
+        *c = total;
+    }
+    if total > 0.0 && total.is_finite() {
+        widest * n as f64 / total
+    } else {
+        1.0
+    }
+}
+
+/// Redistribute the samples of `surface` along `u` (`along_u`) or `v`:
+/// refit it (with `system`'s layout, which must be on the surface's grid)
+/// to itself evaluated at `t' = A⁻¹(t·A(1))`, where `A` is the cumulative
+/// mean arc length `cum` from [`param_stretch`]: equal parameter steps
+/// become equal arc lengths, so samples and control points move from
+/// compressed regions into stretched ones (a sheet pulled deep into a
+/// cavity) while the shape stays the same up to the fit error.
+///
+/// # Errors
+/// Propagates [`FitSystem::fit`] errors.
+pub fn redistribute(
+    surface: &ClosedSurface,
+    system: &mut FitSystem,
+    along_u: bool,
+    cum: &[f64],
+) -> Result<ClosedSurface, SplineError> {
+    let lay = system.layout().clone();
+    let n = cum.len().saturating_sub(1).max(1);
+    let total = cum.last().copied().unwrap_or(0.0);
+    let remap = |t: f64| {
+        // A⁻¹(t·A(1)) by linear interpolation of the cumulative lengths.
+        let a = t * total;
+        let k = cum.partition_point(|&c| c < a).clamp(1, n);
+        let (c0, c1) = (cum[k - 1], cum[k]);
+        let f = if c1 > c0 { (a - c0) / (c1 - c0) } else { 0.5 };
+        (((k - 1) as f64 + f.clamp(0.0, 1.0)) / n as f64).clamp(0.0, 1.0)
+    };
+    let (us, vs): (Vec<f64>, Vec<f64>) = if along_u {
+        (lay.us.iter().map(|&u| remap(u)).collect(), lay.vs.clone())
+    } else {
+        (lay.us.clone(), lay.vs.iter().map(|&v| remap(v)).collect())
+    };
+    refit_at(surface, system, surface.clone(), &us, &vs)
+}
+
+/// Fit `out` (on `system`'s grid) to `surface` evaluated at the grid of
+/// parameters `us × vs`, taken as the layout's samples in order.
+fn refit_at(
+    surface: &ClosedSurface,
+    system: &mut FitSystem,
+    mut out: ClosedSurface,
+    us: &[f64],
+    vs: &[f64],
+) -> Result<ClosedSurface, SplineError> {
+    let mut targets = Vec::with_capacity(us.len() * vs.len());
+    for &v in vs {
+        for &u in us {
             targets.push(surface.eval(u, v).p);
         }
     }
-    let mut out = ClosedSurface::from_net(lay.m, lay.l, vec![Vec3::zeros(); lay.m * lay.l])?;
     system.fit(&mut out, &targets)?;
-    out.fix_orientation();
     Ok(out)
 }
 
@@ -345,6 +440,57 @@ mod tests {
             }
         }
         assert!(worst < 0.01, "max radial error {worst}");
+    }
+
+    #[test]
+    fn redistribution_evens_out_a_stretched_ring_and_keeps_the_shape() {
+        // A sphere whose u runs unevenly: φ = 2π·(u + 0.12·sin 2πu), so the
+        // arc length per unit u varies by a factor of ~7 around each ring.
+        let lay = Layout::samples(24, 15, 72, 45).unwrap();
+        let mut targets = Vec::new();
+        for &v in &lay.vs {
+            for &u in &lay.us {
+                let th = std::f64::consts::PI * v;
+                let ph = 2.0
+                    * std::f64::consts::PI
+                    * (u + 0.12 * (2.0 * std::f64::consts::PI * u).sin());
+                targets.push(Vec3::new(
+                    th.sin() * ph.cos(),
+                    th.sin() * ph.sin(),
+                    -th.cos(),
+                ));
+            }
+        }
+        let mut sys = FitSystem::new(lay, 1e-4).unwrap();
+        let mut s = ClosedSurface::from_net(24, 15, vec![Vec3::zeros(); 24 * 15]).unwrap();
+        sys.fit(&mut s, &targets).unwrap();
+        s.fix_orientation();
+        let mut cum = Vec::new();
+        let before = param_stretch(&s, true, 16, 144, &mut cum);
+        assert!(before > 1.5, "stretch of the uneven sphere {before}");
+        assert_eq!(cum.len(), 145);
+        assert!(cum.windows(2).all(|w| w[1] >= w[0]));
+        let r = redistribute(&s, &mut sys, true, &cum).unwrap();
+        let after = param_stretch(&r, true, 16, 144, &mut cum);
+        assert!(
+            after < 1.15,
+            "stretch after redistribution {after} (before {before})"
+        );
+        // The v direction was even and is measured as such.
+        let along_v = param_stretch(&r, false, 16, 90, &mut cum);
+        assert!(along_v < before, "v stretch {along_v}");
+        let mut worst: f64 = 0.0;
+        for j in 1..40 {
+            for i in 0..60 {
+                let p = r.eval(i as f64 / 60.0, j as f64 / 40.0).p;
+                worst = worst.max((p.norm() - 1.0).abs());
+            }
+        }
+        assert!(
+            worst < 0.02,
+            "redistribution moved the surface off the sphere by {worst}"
+        );
+        assert_eq!(r.orientation(), s.orientation());
     }
 
     #[test]

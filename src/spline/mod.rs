@@ -15,7 +15,7 @@ pub mod basis;
 pub mod fit;
 pub mod surface;
 
-pub use fit::{regrid, FitSystem};
+pub use fit::{param_stretch, redistribute, regrid, FitSystem};
 pub use surface::{ClosedSurface, Layout, SurfacePoint};
 
 use thiserror::Error;
