@@ -944,6 +944,7 @@ fn phases_of(reports: &[membrane::Report]) -> Vec<(String, f64)> {
         ("search".to_string(), phase(|t| t.search_ms)),
         ("fit".to_string(), phase(|t| t.fit_ms)),
         ("mesh".to_string(), phase(|t| t.mesh_ms)),
+        ("other pole axes".to_string(), phase(|t| t.other_axes_ms)),
         ("total (report)".to_string(), phase(|t| t.total_ms)),
     ]
 }

@@ -36,7 +36,7 @@ pub fn run(
     }
     let t = &r.times;
     println!(
-        "{}: points in {} used {} dropped {} (non-finite {}, outliers {}); grid {}x{}; iterations {}; eta_g {:.4}; stop {}; {:.1} ms (prepare {:.1}, init {:.1}, search {:.1}, fit {:.1}, mesh {:.1}) -> {}",
+        "{}: points in {} used {} dropped {} (non-finite {}, outliers {}); grid {}x{}; iterations {}; eta_g {:.4}; stop {}; {:.1} ms (prepare {:.1}, init {:.1}, search {:.1}, fit {:.1}, mesh {:.1}, other pole axes {:.1}; pole axis {} of {} tried) -> {}",
         input.display(),
         r.points_in + read_dropped,
         r.points_used,
@@ -54,6 +54,9 @@ pub fn run(
         t.search_ms,
         t.fit_ms,
         t.mesh_ms,
+        t.other_axes_ms,
+        ["x", "y", "z"][r.pole_axis.min(2)],
+        r.pole_axes_tried,
         output.display(),
     );
     Ok(())

@@ -58,6 +58,11 @@ pub struct MembraneConfig {
     pub delta_scale: f64,
     /// Axis of the two poles.
     pub pole_axis: PoleAxis,
+    /// Cold whole objects with an automatic `pole_axis`: how many pole axes
+    /// to try (1–3; after the configured one, the most different
+    /// bounding-box edge first); the reconstruction with the highest final
+    /// η_g × point coverage is kept.
+    pub pole_axis_candidates: usize,
     /// Quantile used for the robust extreme points of the initial octagon.
     pub init_quantile: f64,
     /// Enlargement of the initial surface beyond the smallest one enclosing every point.
@@ -176,6 +181,7 @@ impl Default for MembraneConfig {
             delta_quantile: 0.25,
             delta_scale: 1.3,
             pole_axis: PoleAxis::Shortest,
+            pole_axis_candidates: 2,
             init_quantile: 0.002,
             init_margin: 1.05,
             grid_start: [8, 5],

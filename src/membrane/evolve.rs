@@ -64,9 +64,9 @@
 //! off course (synth bottle sequence: warm frames within 0.01 of cold 19/19
 //! → 9/19).
 
-use super::config::MembraneConfig;
+use super::config::{MembraneConfig, PoleAxis};
 use super::extract::extract_mesh;
-use super::init::octagon;
+use super::init::{self, octagon};
 use super::occupancy::OutsideGrid;
 use super::view;
 use super::{Budget, MembraneError, PhaseTimes, Reconstruction, Report, StopReason, WarmStart};
@@ -149,6 +149,9 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), MembraneError> {
     }
     if !(cfg.pole_tension >= 0.0 && cfg.pole_tension <= 1.0) {
         return bad("pole_tension", "must be in [0, 1]");
+    }
+    if !(1..=3).contains(&cfg.pole_axis_candidates) {
+        return bad("pole_axis_candidates", "must be 1, 2 or 3");
     }
     if !(cfg.redistribute_stretch == 0.0
         || (cfg.redistribute_stretch > 1.0 && cfg.redistribute_stretch.is_finite()))
@@ -1033,6 +1036,9 @@ pub(crate) fn run(
         },
         map: HashMap::new(),
     };
+    // The poles' coordinate axis, resolved once (reported; the octagon
+    // takes it explicitly).
+    let pole_axis = init::pole_axis_of(&points, cfg.pole_axis, cfg.init_quantile);
     let mut surface = match warm {
         Some(w) => {
             let mut s = w.surface.clone();
@@ -1044,7 +1050,7 @@ pub(crate) fn run(
             let fit = fits.get(cfg, m, l)?;
             octagon(
                 &points,
-                cfg.pole_axis,
+                [PoleAxis::X, PoleAxis::Y, PoleAxis::Z][pole_axis],
                 cfg.init_quantile,
                 cfg.init_margin,
                 fit,
@@ -1297,6 +1303,8 @@ pub(crate) fn run(
         eta_final,
         stop,
         warm: warm.is_some(),
+        pole_axis,
+        pole_axes_tried: 1,
         times,
     };
     Ok(Reconstruction {

@@ -60,6 +60,12 @@ pub fn quantile_bounds(points: &[Vec3], q: f64) -> (Vec3, Vec3) {
     (lo, hi)
 }
 
+/// The coordinate axis the poles of [`octagon`] take for `axis` on `points`.
+pub fn pole_axis_of(points: &[Vec3], axis: PoleAxis, quantile: f64) -> usize {
+    let (lo, hi) = quantile_bounds(points, quantile);
+    axes_for(axis, &(hi - lo))[2]
+}
+
 /// Build the enclosing 3D-octagon surface for `points` on the grid of `fit`.
 ///
 /// # Errors

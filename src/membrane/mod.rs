@@ -24,6 +24,14 @@
 //! significance test, a robust median shift, a 3×3 median filter of shifts,
 //! a roughness-penalised fit, a shrinking search depth with a δ floor, and an
 //! inward force gated by an occupancy inside/outside grid ([`occupancy`]).
+//!
+//! The membrane is a sphere topologically, and where its poles sit decides
+//! how it meets a tunnel or a deep cavity: with the poles in a torus's hole
+//! the two hole caps stall apart, while from the side the ring is wrapped
+//! closely. A cold whole object is therefore reconstructed along up to
+//! `pole_axis_candidates` pole axes (the configured one, then the most
+//! different bounding-box edge), and the result with the highest final
+//! `η_g` × point coverage is kept ([`reconstruct`]).
 
 pub mod config;
 pub mod evolve;
@@ -35,7 +43,7 @@ pub mod view;
 pub use config::{AttributeWeight, MembraneConfig, PoleAxis};
 pub use extract::{extract_mesh, SEPARABILITY_CHANNEL};
 
-use crate::cloud::{CloudError, PointCloud};
+use crate::cloud::{CloudError, PointCloud, Vec3};
 use crate::mesh::TriMesh;
 use crate::spline::{ClosedSurface, SplineError};
 use serde::Serialize;
@@ -162,6 +170,9 @@ pub struct PhaseTimes {
     pub fit_ms: f64,
     /// Final scoring pass and mesh extraction.
     pub mesh_ms: f64,
+    /// Whole reconstructions along other pole axes that were tried and not
+    /// kept (`pole_axis_candidates`).
+    pub other_axes_ms: f64,
     /// Everything.
     pub total_ms: f64,
 }
@@ -209,6 +220,11 @@ pub struct Report {
     pub stop: StopReason,
     /// Whether it started from a warm start.
     pub warm: bool,
+    /// Coordinate axis (0 = x, 1 = y, 2 = z) of the initial surface's poles
+    /// (for a warm start, the axis the configuration resolves to).
+    pub pole_axis: usize,
+    /// Pole axes tried (`pole_axis_candidates`; 1 when only one ran).
+    pub pole_axes_tried: usize,
     /// Time per phase.
     pub times: PhaseTimes,
 }
@@ -247,11 +263,128 @@ pub fn reconstruct(
 ) -> Result<Reconstruction, MembraneError> {
     evolve::validate(cfg)?;
     if cfg.threads == 0 {
-        return evolve::run(cloud, cfg, budget, warm);
+        return select_pole_axis(cloud, cfg, budget, warm);
     }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(cfg.threads)
         .build()
         .map_err(|e| MembraneError::ThreadPool(e.to_string()))?;
-    pool.install(|| evolve::run(cloud, cfg, budget, warm))
+    pool.install(|| select_pole_axis(cloud, cfg, budget, warm))
+}
+
+/// The evolution along the configured pole axis and, for a cold whole
+/// object with an automatic axis (`shortest`/`longest`), along up to
+/// `pole_axis_candidates − 1` other axes, the most different bounding-box
+/// edge first. The reconstruction with the highest [`selection_score`] is
+/// kept.
+fn select_pole_axis(
+    cloud: &PointCloud,
+    cfg: &MembraneConfig,
+    budget: &Budget,
+    warm: Option<&WarmStart>,
+) -> Result<Reconstruction, MembraneError> {
+    let t0 = Instant::now();
+    let first = evolve::run(cloud, cfg, budget, warm)?;
+    let within_budget = matches!(
+        first.report.stop,
+        StopReason::Converged | StopReason::MaxIterations
+    );
+    let farthest_first = match cfg.pole_axis {
+        PoleAxis::Shortest => true,
+        PoleAxis::Longest => false,
+        PoleAxis::X | PoleAxis::Y | PoleAxis::Z => return Ok(first),
+    };
+    if cfg.pole_axis_candidates <= 1
+        || warm.is_some()
+        || first.report.viewpoint.is_some()
+        || !within_budget
+    {
+        return Ok(first);
+    }
+    let finite: Vec<Vec3> = cloud
+        .points
+        .iter()
+        .filter(|p| p.iter().all(|c| c.is_finite()))
+        .copied()
+        .collect();
+    let (lo, hi) = init::quantile_bounds(&finite, cfg.init_quantile);
+    let extent = hi - lo;
+    let mut others: Vec<usize> = (0..3).filter(|&a| a != first.report.pole_axis).collect();
+    others.sort_by(|&a, &b| extent[a].total_cmp(&extent[b]));
+    if farthest_first {
+        others.reverse();
+    }
+    others.truncate(cfg.pole_axis_candidates - 1);
+    let mut best_score = selection_score(&first, &finite);
+    let mut best = first;
+    let mut tried = 1;
+    let mut discarded_ms = 0.0;
+    for axis in others {
+        let t = Instant::now();
+        let alt = MembraneConfig {
+            pole_axis: [PoleAxis::X, PoleAxis::Y, PoleAxis::Z][axis],
+            ..cfg.clone()
+        };
+        tried += 1;
+        // A failure along another axis keeps what we have; so does a run
+        // cut short by the deadline (its score is not comparable).
+        match evolve::run(cloud, &alt, budget, None) {
+            Ok(rec)
+                if matches!(
+                    rec.report.stop,
+                    StopReason::Converged | StopReason::MaxIterations
+                ) =>
+            {
+                let score = selection_score(&rec, &finite);
+                if score > best_score {
+                    discarded_ms += best.report.times.total_ms;
+                    best_score = score;
+                    best = rec;
+                } else {
+                    discarded_ms += t.elapsed().as_secs_f64() * 1e3;
+                }
+            }
+            _ => discarded_ms += t.elapsed().as_secs_f64() * 1e3,
+        }
+    }
+    best.report.pole_axes_tried = tried;
+    best.report.times.other_axes_ms = discarded_ms;
+    best.report.times.total_ms = t0.elapsed().as_secs_f64() * 1e3;
+    Ok(best)
+}
+
+/// Points at most this many of whose are checked by [`selection_score`].
+const COVERAGE_QUERIES: usize = 5000;
+
+/// Score of a reconstruction for the pole-axis selection: its final η_g
+/// times its *coverage*, the share of the input points (at most
+/// [`COVERAGE_QUERIES`], evenly strided) within one mean mesh edge of a mesh
+/// vertex. η_g alone rewards a membrane that lies well on the parts it
+/// reaches, even when it slipped inside a thin tube and left the rest of the
+/// surface uncovered; coverage alone ignores how well it separates.
+fn selection_score(rec: &Reconstruction, points: &[Vec3]) -> f64 {
+    use kiddo::{ImmutableKdTree, SquaredEuclidean};
+    let v = &rec.mesh.vertices;
+    if v.is_empty() || points.is_empty() || rec.mesh.triangles.is_empty() {
+        return 0.0;
+    }
+    let edge = rec
+        .mesh
+        .triangles
+        .iter()
+        .map(|t| (v[t[0] as usize] - v[t[1] as usize]).norm())
+        .sum::<f64>()
+        / rec.mesh.triangles.len() as f64;
+    let coords: Vec<[f64; 3]> = v.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coords);
+    let step = points.len().div_ceil(COVERAGE_QUERIES).max(1);
+    let (mut hit, mut n) = (0usize, 0usize);
+    for p in points.iter().step_by(step) {
+        let d2 = tree
+            .nearest_one::<SquaredEuclidean>(&[p.x, p.y, p.z])
+            .distance;
+        hit += usize::from(d2 <= edge * edge);
+        n += 1;
+    }
+    rec.report.eta_final * hit as f64 / n.max(1) as f64
 }
