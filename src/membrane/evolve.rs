@@ -885,15 +885,38 @@ fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
 }
 
-/// Run one reconstruction (in the current rayon pool).
-pub(crate) fn run(
-    cloud: &PointCloud,
-    cfg: &MembraneConfig,
-    budget: &Budget,
-    warm: Option<&WarmStart>,
-) -> Result<Reconstruction, MembraneError> {
+/// What the evolution needs from the cloud, prepared once (and shared by
+/// the pole-axis candidates of one reconstruction).
+pub(crate) struct Prepared {
+    points_in: usize,
+    points_non_finite: usize,
+    points_thinned: usize,
+    points_outliers: usize,
+    points_completed: usize,
+    /// The used points (finite, thinned, outlier-filtered, plus a single
+    /// view's completion).
+    pub(crate) points: Vec<Vec3>,
+    d_used: Vec<f64>,
+    delta: f64,
+    scale: f64,
+    view: Option<view::ViewBuffer>,
+    index: SpatialIndex,
+    attributes: Option<AttributeSet>,
+    outside: Option<OutsideGrid>,
+    pub(crate) prepare_ms: f64,
+}
+
+impl Prepared {
+    /// The single view, if the cloud is one.
+    pub(crate) fn is_single_view(&self) -> bool {
+        self.view.is_some()
+    }
+}
+
+/// Prepare `cloud`: finite points, subsample, outlier filter, δ, single-view
+/// detection and completion, spatial index, attributes, occupancy grid.
+pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepared, MembraneError> {
     let t_start = Instant::now();
-    let mut times = PhaseTimes::default();
 
     // ---- prepare: finite points, outlier filter, δ, index, occupancy ----
     let points_in = cloud.len();
@@ -986,15 +1009,6 @@ pub(crate) fn run(
         let used: Vec<usize> = keep.iter().map(|&k| finite_idx[k]).collect();
         Some(attribute_set(&cloud.select(&used), cfg, delta)?)
     };
-    let searcher = if cfg.local_delta {
-        Searcher::new(&index, Delta::Local(&d_used), cfg.boundaries)?
-    } else {
-        Searcher::new(&index, Delta::Global(delta), cfg.boundaries)?
-    };
-    let searcher = match &attributes {
-        Some(a) => searcher.with_attributes(a)?,
-        None => searcher,
-    };
     let outside = if cfg.inward_force {
         OutsideGrid::new(
             &points,
@@ -1013,6 +1027,63 @@ pub(crate) fn run(
     } else {
         None
     };
+    Ok(Prepared {
+        points_in,
+        points_non_finite,
+        points_thinned,
+        points_outliers,
+        points_completed,
+        points,
+        d_used,
+        delta,
+        scale,
+        view,
+        index,
+        attributes,
+        outside,
+        prepare_ms: ms(t_start),
+    })
+}
+
+/// Evolve the membrane on prepared points (see the module docs); `pole`
+/// overrides the configured pole axis (0 = x, 1 = y, 2 = z) of a cold start.
+pub(crate) fn evolve(
+    prep: &Prepared,
+    cfg: &MembraneConfig,
+    budget: &Budget,
+    warm: Option<&WarmStart>,
+    pole: Option<usize>,
+) -> Result<Reconstruction, MembraneError> {
+    let t_start = Instant::now();
+    let mut times = PhaseTimes {
+        prepare_ms: prep.prepare_ms,
+        ..PhaseTimes::default()
+    };
+    let Prepared {
+        points_in,
+        points_non_finite,
+        points_thinned,
+        points_outliers,
+        points_completed,
+        ref points,
+        ref d_used,
+        delta,
+        scale,
+        ref view,
+        ref index,
+        ref attributes,
+        ref outside,
+        ..
+    } = *prep;
+    let searcher = if cfg.local_delta {
+        Searcher::new(index, Delta::Local(d_used), cfg.boundaries)?
+    } else {
+        Searcher::new(index, Delta::Global(delta), cfg.boundaries)?
+    };
+    let searcher = match attributes {
+        Some(a) => searcher.with_attributes(a)?,
+        None => searcher,
+    };
     let stepper = Stepper {
         cfg,
         searcher,
@@ -1023,7 +1094,6 @@ pub(crate) fn run(
         center: points.iter().sum::<Vec3>() / points.len() as f64,
         reach: scale,
     };
-    times.prepare_ms = ms(t_start);
 
     // ---- initial surface ----
     let t_init = Instant::now();
@@ -1038,7 +1108,8 @@ pub(crate) fn run(
     };
     // The poles' coordinate axis, resolved once (reported; the octagon
     // takes it explicitly).
-    let pole_axis = init::pole_axis_of(&points, cfg.pole_axis, cfg.init_quantile);
+    let pole_axis =
+        pole.unwrap_or_else(|| init::pole_axis_of(points, cfg.pole_axis, cfg.init_quantile));
     let mut surface = match warm {
         Some(w) => {
             let mut s = w.surface.clone();
@@ -1049,7 +1120,7 @@ pub(crate) fn run(
             let [m, l] = cfg.grid_start;
             let fit = fits.get(cfg, m, l)?;
             octagon(
-                &points,
+                points,
                 [PoleAxis::X, PoleAxis::Y, PoleAxis::Z][pole_axis],
                 cfg.init_quantile,
                 cfg.init_margin,
@@ -1280,7 +1351,7 @@ pub(crate) fn run(
     let eta_final = eta.iter().sum::<f64>() / eta.len().max(1) as f64;
     let mesh = extract_mesh(&surface, &layout, &eta);
     times.mesh_ms = ms(t_mesh);
-    times.total_ms = ms(t_start);
+    times.total_ms = prep.prepare_ms + ms(t_start);
     let report = Report {
         points_in,
         points_non_finite,

@@ -284,11 +284,14 @@ fn select_pole_axis(
     warm: Option<&WarmStart>,
 ) -> Result<Reconstruction, MembraneError> {
     let t0 = Instant::now();
-    let first = evolve::run(cloud, cfg, budget, warm)?;
-    let within_budget = matches!(
-        first.report.stop,
-        StopReason::Converged | StopReason::MaxIterations
-    );
+    let prep = evolve::prepare(cloud, cfg)?;
+    let first = evolve::evolve(&prep, cfg, budget, warm, None)?;
+    let within_budget = |r: &Reconstruction| {
+        matches!(
+            r.report.stop,
+            StopReason::Converged | StopReason::MaxIterations
+        )
+    };
     let farthest_first = match cfg.pole_axis {
         PoleAxis::Shortest => true,
         PoleAxis::Longest => false,
@@ -296,18 +299,12 @@ fn select_pole_axis(
     };
     if cfg.pole_axis_candidates <= 1
         || warm.is_some()
-        || first.report.viewpoint.is_some()
-        || !within_budget
+        || prep.is_single_view()
+        || !within_budget(&first)
     {
         return Ok(first);
     }
-    let finite: Vec<Vec3> = cloud
-        .points
-        .iter()
-        .filter(|p| p.iter().all(|c| c.is_finite()))
-        .copied()
-        .collect();
-    let (lo, hi) = init::quantile_bounds(&finite, cfg.init_quantile);
+    let (lo, hi) = init::quantile_bounds(&prep.points, cfg.init_quantile);
     let extent = hi - lo;
     let mut others: Vec<usize> = (0..3).filter(|&a| a != first.report.pole_axis).collect();
     others.sort_by(|&a, &b| extent[a].total_cmp(&extent[b]));
@@ -315,29 +312,20 @@ fn select_pole_axis(
         others.reverse();
     }
     others.truncate(cfg.pole_axis_candidates - 1);
-    let mut best_score = selection_score(&first, &finite);
+    let mut best_score = selection_score(&first, &prep.points);
     let mut best = first;
     let mut tried = 1;
     let mut discarded_ms = 0.0;
     for axis in others {
         let t = Instant::now();
-        let alt = MembraneConfig {
-            pole_axis: [PoleAxis::X, PoleAxis::Y, PoleAxis::Z][axis],
-            ..cfg.clone()
-        };
         tried += 1;
         // A failure along another axis keeps what we have; so does a run
         // cut short by the deadline (its score is not comparable).
-        match evolve::run(cloud, &alt, budget, None) {
-            Ok(rec)
-                if matches!(
-                    rec.report.stop,
-                    StopReason::Converged | StopReason::MaxIterations
-                ) =>
-            {
-                let score = selection_score(&rec, &finite);
+        match evolve::evolve(&prep, cfg, budget, None, Some(axis)) {
+            Ok(rec) if within_budget(&rec) => {
+                let score = selection_score(&rec, &prep.points);
                 if score > best_score {
-                    discarded_ms += best.report.times.total_ms;
+                    discarded_ms += best.report.times.total_ms - prep.prepare_ms;
                     best_score = score;
                     best = rec;
                 } else {
@@ -357,9 +345,9 @@ fn select_pole_axis(
 const COVERAGE_QUERIES: usize = 5000;
 
 /// Score of a reconstruction for the pole-axis selection: its final η_g
-/// times its *coverage*, the share of the input points (at most
-/// [`COVERAGE_QUERIES`], evenly strided) within one mean mesh edge of a mesh
-/// vertex. η_g alone rewards a membrane that lies well on the parts it
+/// times its *coverage*, the share of the used points (after the outlier
+/// filter; at most [`COVERAGE_QUERIES`], evenly strided) within one mean
+/// mesh edge of a mesh vertex. η_g alone rewards a membrane that lies well on the parts it
 /// reaches, even when it slipped inside a thin tube and left the rest of the
 /// surface uncovered; coverage alone ignores how well it separates.
 fn selection_score(rec: &Reconstruction, points: &[Vec3]) -> f64 {
