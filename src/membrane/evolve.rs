@@ -907,7 +907,7 @@ pub(crate) struct Prepared {
 }
 
 impl Prepared {
-    /// The single view, if the cloud is one.
+    /// Whether the cloud was taken as a single depth view.
     pub(crate) fn is_single_view(&self) -> bool {
         self.view.is_some()
     }
