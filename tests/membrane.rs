@@ -383,9 +383,11 @@ fn warm_start_converges_faster_than_cold() {
     );
     assert!(warm.report.warm);
     assert!(warm.report.iterations < cold.report.iterations);
-    // A cold whole object tries a second pole axis; a warm start keeps its own.
-    assert_eq!(cold.report.pole_axes_tried, 2);
+    // A warm start keeps its own pole axis; a cold ellipsoid, whose membrane
+    // lies on the data everywhere (support ≥ pole_axis_support), needs no
+    // second one either (the torus test below needs it).
     assert_eq!(warm.report.pole_axes_tried, 1);
+    assert_eq!(cold.report.pole_axes_tried, 1);
     assert_eq!(warm.report.times.other_axes_ms, 0.0);
     assert!(fw >= 0.97, "warm F = {fw}");
 }

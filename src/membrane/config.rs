@@ -63,6 +63,10 @@ pub struct MembraneConfig {
     /// bounding-box edge first); the reconstruction with the highest final
     /// η_g × point coverage is kept.
     pub pole_axis_candidates: usize,
+    /// Other pole axes are tried only when less than this share of the
+    /// first reconstruction's mesh vertices lie within one mean mesh edge
+    /// of a used point (1 = always).
+    pub pole_axis_support: f64,
     /// Quantile used for the robust extreme points of the initial octagon.
     pub init_quantile: f64,
     /// Enlargement of the initial surface beyond the smallest one enclosing every point.
@@ -182,6 +186,7 @@ impl Default for MembraneConfig {
             delta_scale: 1.3,
             pole_axis: PoleAxis::Shortest,
             pole_axis_candidates: 2,
+            pole_axis_support: 0.99,
             init_quantile: 0.002,
             init_margin: 1.05,
             grid_start: [8, 5],

@@ -153,6 +153,9 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), MembraneError> {
     if !(1..=3).contains(&cfg.pole_axis_candidates) {
         return bad("pole_axis_candidates", "must be 1, 2 or 3");
     }
+    if !(cfg.pole_axis_support >= 0.0 && cfg.pole_axis_support <= 1.0) {
+        return bad("pole_axis_support", "must be in [0, 1]");
+    }
     if !(cfg.redistribute_stretch == 0.0
         || (cfg.redistribute_stretch > 1.0 && cfg.redistribute_stretch.is_finite()))
     {

@@ -28,10 +28,12 @@
 //! The membrane is a sphere topologically, and where its poles sit decides
 //! how it meets a tunnel or a deep cavity: with the poles in a torus's hole
 //! the two hole caps stall apart, while from the side the ring is wrapped
-//! closely. A cold whole object is therefore reconstructed along up to
-//! `pole_axis_candidates` pole axes (the configured one, then the most
-//! different bounding-box edge), and the result with the highest final
-//! `η_g` × point coverage is kept ([`reconstruct`]).
+//! closely. A cold whole object whose membrane leaves data-free parts (less
+//! than `pole_axis_support` of its mesh vertices near a point) is therefore
+//! reconstructed along up to `pole_axis_candidates` pole axes (the
+//! configured one, then the most different bounding-box edge), and the
+//! result with the highest final `η_g` × point coverage is kept
+//! ([`reconstruct`]).
 
 pub mod config;
 pub mod evolve;
@@ -273,7 +275,8 @@ pub fn reconstruct(
 }
 
 /// The evolution along the configured pole axis and, for a cold whole
-/// object with an automatic axis (`shortest`/`longest`), along up to
+/// object with an automatic axis (`shortest`/`longest`) whose first
+/// reconstruction has a [`support`] below `pole_axis_support`, along up to
 /// `pole_axis_candidates − 1` other axes, the most different bounding-box
 /// edge first. The reconstruction with the highest [`selection_score`] is
 /// kept.
@@ -302,6 +305,12 @@ fn select_pole_axis(
         || prep.is_single_view()
         || !within_budget(&first)
     {
+        return Ok(first);
+    }
+    // A membrane lying on the data everywhere has nothing to gain from
+    // another axis; one spanning a hole or a cavity opening has.
+    let point_tree = kd_tree(&prep.points);
+    if support(&first, &point_tree) >= cfg.pole_axis_support {
         return Ok(first);
     }
     let (lo, hi) = init::quantile_bounds(&prep.points, cfg.init_quantile);
@@ -341,6 +350,44 @@ fn select_pole_axis(
     Ok(best)
 }
 
+/// A kd-tree over `points`.
+fn kd_tree(points: &[Vec3]) -> kiddo::ImmutableKdTree<f64, 3> {
+    let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+    kiddo::ImmutableKdTree::new_from_slice(&coords)
+}
+
+/// Mean edge length of a mesh: the tolerance of [`support`] and
+/// [`selection_score`].
+fn mean_edge(mesh: &TriMesh) -> f64 {
+    let v = &mesh.vertices;
+    mesh.triangles
+        .iter()
+        .map(|t| (v[t[0] as usize] - v[t[1] as usize]).norm())
+        .sum::<f64>()
+        / mesh.triangles.len().max(1) as f64
+}
+
+/// Share of the mesh's vertices within one mean mesh edge of a used point
+/// (`points` is their kd-tree): below 1 where the membrane spans space
+/// without data, such as a torus's hole or a cup's opening.
+fn support(rec: &Reconstruction, points: &kiddo::ImmutableKdTree<f64, 3>) -> f64 {
+    let v = &rec.mesh.vertices;
+    if v.is_empty() {
+        return 0.0;
+    }
+    let tol2 = mean_edge(&rec.mesh).powi(2);
+    let near = v
+        .iter()
+        .filter(|p| {
+            points
+                .nearest_one::<kiddo::SquaredEuclidean>(&[p.x, p.y, p.z])
+                .distance
+                <= tol2
+        })
+        .count();
+    near as f64 / v.len() as f64
+}
+
 /// Points at most this many of whose are checked by [`selection_score`].
 const COVERAGE_QUERIES: usize = 5000;
 
@@ -351,27 +398,18 @@ const COVERAGE_QUERIES: usize = 5000;
 /// reaches, even when it slipped inside a thin tube and left the rest of the
 /// surface uncovered; coverage alone ignores how well it separates.
 fn selection_score(rec: &Reconstruction, points: &[Vec3]) -> f64 {
-    use kiddo::{ImmutableKdTree, SquaredEuclidean};
-    let v = &rec.mesh.vertices;
-    if v.is_empty() || points.is_empty() || rec.mesh.triangles.is_empty() {
+    if rec.mesh.vertices.is_empty() || points.is_empty() || rec.mesh.triangles.is_empty() {
         return 0.0;
     }
-    let edge = rec
-        .mesh
-        .triangles
-        .iter()
-        .map(|t| (v[t[0] as usize] - v[t[1] as usize]).norm())
-        .sum::<f64>()
-        / rec.mesh.triangles.len() as f64;
-    let coords: Vec<[f64; 3]> = v.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coords);
+    let tol2 = mean_edge(&rec.mesh).powi(2);
+    let tree = kd_tree(&rec.mesh.vertices);
     let step = points.len().div_ceil(COVERAGE_QUERIES).max(1);
     let (mut hit, mut n) = (0usize, 0usize);
     for p in points.iter().step_by(step) {
         let d2 = tree
-            .nearest_one::<SquaredEuclidean>(&[p.x, p.y, p.z])
+            .nearest_one::<kiddo::SquaredEuclidean>(&[p.x, p.y, p.z])
             .distance;
-        hit += usize::from(d2 <= edge * edge);
+        hit += usize::from(d2 <= tol2);
         n += 1;
     }
     rec.report.eta_final * hit as f64 / n.max(1) as f64
