@@ -439,6 +439,29 @@ fn iteration_budget_and_deadline_are_respected() {
     }
 }
 
+/// A sphere cloud where five points are each repeated 2,000 times (a driver
+/// re-sending a stale buffer, a careless merge): the repeats are dropped and
+/// counted. Kept, they made most k-NN distances 0 and δ collapse (η_g 0).
+#[test]
+fn exact_duplicate_points_are_dropped_and_counted() {
+    let a = Vec3::repeat(0.5);
+    let mut pts = ellipsoid(3_000, a, Vec3::zeros(), 11);
+    let repeated: Vec<Vec3> = pts[..5].to_vec();
+    for p in &repeated {
+        pts.extend(std::iter::repeat_n(*p, 2_000));
+    }
+    let cloud = PointCloud::from_points(pts);
+    let rec = reconstruct(&cloud, &serial(), &Budget::unlimited(), None).unwrap();
+    check_mesh(&rec.mesh);
+    assert_eq!(rec.report.points_duplicate, 10_000);
+    let f = score(&rec.mesh, &ellipsoid(100_000, a, Vec3::zeros(), 12));
+    eprintln!(
+        "sphere with repeats: F={f:.4} eta_g={:.3}",
+        rec.report.eta_final
+    );
+    assert!(f >= 0.97, "F = {f}");
+}
+
 #[test]
 fn bad_inputs_give_errors_not_panics() {
     let cfg = serial();

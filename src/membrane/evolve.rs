@@ -79,7 +79,7 @@ use crate::spline::{
     param_stretch, redistribute, regrid, ClosedSurface, FitSystem, Layout, SurfacePoint,
 };
 use rayon::prelude::*;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::{Mutex, OnceLock};
 use std::time::Instant;
 
@@ -893,6 +893,7 @@ fn ms(since: Instant) -> f64 {
 pub(crate) struct Prepared {
     points_in: usize,
     points_non_finite: usize,
+    points_duplicate: usize,
     points_thinned: usize,
     points_outliers: usize,
     points_completed: usize,
@@ -933,6 +934,17 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
         .map(|(i, _)| i)
         .collect();
     let points_non_finite = points_in - finite_idx.len();
+    // Exact repeats of a point carry no new geometry; many of them would
+    // collapse the k-NN distances and with them δ.
+    let mut seen = HashSet::with_capacity(finite_idx.len());
+    let finite_idx: Vec<usize> = finite_idx
+        .into_iter()
+        .filter(|&i| {
+            let p = cloud.points[i];
+            seen.insert([p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
+        })
+        .collect();
+    let points_duplicate = points_in - points_non_finite - finite_idx.len();
     let finite_len = finite_idx.len();
     let finite_idx = thin(finite_idx, cfg.max_points);
     let points_thinned = finite_len - finite_idx.len();
@@ -1033,6 +1045,7 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
     Ok(Prepared {
         points_in,
         points_non_finite,
+        points_duplicate,
         points_thinned,
         points_outliers,
         points_completed,
@@ -1065,6 +1078,7 @@ pub(crate) fn evolve(
     let Prepared {
         points_in,
         points_non_finite,
+        points_duplicate,
         points_thinned,
         points_outliers,
         points_completed,
@@ -1358,6 +1372,7 @@ pub(crate) fn evolve(
     let report = Report {
         points_in,
         points_non_finite,
+        points_duplicate,
         points_thinned,
         points_outliers,
         points_used: points.len(),

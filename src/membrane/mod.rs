@@ -186,6 +186,8 @@ pub struct Report {
     pub points_in: usize,
     /// Points dropped as NaN/inf.
     pub points_non_finite: usize,
+    /// Exact repeats of an earlier point, dropped.
+    pub points_duplicate: usize,
     /// Points left out by the `max_points` subsample.
     pub points_thinned: usize,
     /// Points dropped by the k-NN outlier filter.

@@ -52,7 +52,10 @@ pub fn frame_diagnostics(
         frame_index: r.frame,
         points_in: points_in as u32,
         points_used: rep.points_used as u32,
-        points_dropped: (dropped + rep.points_non_finite + rep.points_outliers) as u32,
+        points_dropped: (dropped
+            + rep.points_non_finite
+            + rep.points_duplicate
+            + rep.points_outliers) as u32,
         iterations: r.iterations as u32,
         global_separability: rep.eta_final as f32,
         latency_ms: r.latency_ms as f32,
