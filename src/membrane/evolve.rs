@@ -891,12 +891,7 @@ fn ms(since: Instant) -> f64 {
 /// What the evolution needs from the cloud, prepared once (and shared by
 /// the pole-axis candidates of one reconstruction).
 pub(crate) struct Prepared {
-    points_in: usize,
-    points_non_finite: usize,
-    points_duplicate: usize,
-    points_thinned: usize,
-    points_outliers: usize,
-    points_completed: usize,
+    counts: PointCounts,
     /// The used points (finite, thinned, outlier-filtered, plus a single
     /// view's completion).
     pub(crate) points: Vec<Vec3>,
@@ -908,6 +903,17 @@ pub(crate) struct Prepared {
     attributes: Option<AttributeSet>,
     outside: Option<OutsideGrid>,
     pub(crate) prepare_ms: f64,
+}
+
+/// What the preparation did with the input points (see [`Report`]).
+#[derive(Debug, Clone, Copy)]
+struct PointCounts {
+    input: usize,
+    non_finite: usize,
+    duplicate: usize,
+    thinned: usize,
+    outliers: usize,
+    completed: usize,
 }
 
 impl Prepared {
@@ -1043,12 +1049,14 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
         None
     };
     Ok(Prepared {
-        points_in,
-        points_non_finite,
-        points_duplicate,
-        points_thinned,
-        points_outliers,
-        points_completed,
+        counts: PointCounts {
+            input: points_in,
+            non_finite: points_non_finite,
+            duplicate: points_duplicate,
+            thinned: points_thinned,
+            outliers: points_outliers,
+            completed: points_completed,
+        },
         points,
         d_used,
         delta,
@@ -1076,12 +1084,7 @@ pub(crate) fn evolve(
         ..PhaseTimes::default()
     };
     let Prepared {
-        points_in,
-        points_non_finite,
-        points_duplicate,
-        points_thinned,
-        points_outliers,
-        points_completed,
+        counts,
         ref points,
         ref d_used,
         delta,
@@ -1370,13 +1373,13 @@ pub(crate) fn evolve(
     times.mesh_ms = ms(t_mesh);
     times.total_ms = prep.prepare_ms + ms(t_start);
     let report = Report {
-        points_in,
-        points_non_finite,
-        points_duplicate,
-        points_thinned,
-        points_outliers,
+        points_in: counts.input,
+        points_non_finite: counts.non_finite,
+        points_duplicate: counts.duplicate,
+        points_thinned: counts.thinned,
+        points_outliers: counts.outliers,
         points_used: points.len(),
-        points_completed,
+        points_completed: counts.completed,
         viewpoint: view.as_ref().map(|v| {
             let e = v.eye();
             [e.x, e.y, e.z]
