@@ -226,7 +226,7 @@ pub fn sample_surface(mesh: &TriMesh, n: usize, seed: u64) -> Result<SurfaceSamp
 }
 
 /// For every query point, the distance to and the index of its nearest reference point.
-fn nearest(reference: &[Vec3], queries: &[Vec3]) -> Vec<(f64, usize)> {
+pub(crate) fn nearest(reference: &[Vec3], queries: &[Vec3]) -> Vec<(f64, usize)> {
     let coords: Vec<[f64; 3]> = reference.iter().map(|p| [p.x, p.y, p.z]).collect();
     let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coords);
     queries

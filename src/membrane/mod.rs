@@ -47,6 +47,7 @@ pub use extract::{extract_mesh, SEPARABILITY_CHANNEL};
 
 use crate::cloud::{CloudError, PointCloud, Vec3};
 use crate::mesh::TriMesh;
+use crate::metrics::nearest;
 use crate::spline::{ClosedSurface, SplineError};
 use serde::Serialize;
 use std::time::{Duration, Instant};
@@ -172,8 +173,8 @@ pub struct PhaseTimes {
     pub fit_ms: f64,
     /// Final scoring pass and mesh extraction.
     pub mesh_ms: f64,
-    /// Whole reconstructions along other pole axes that were tried and not
-    /// kept (`pole_axis_candidates`).
+    /// Evolutions along other pole axes that were tried and not kept
+    /// (`pole_axis_candidates`; they share the preparation).
     pub other_axes_ms: f64,
     /// Everything.
     pub total_ms: f64,
@@ -311,8 +312,7 @@ fn select_pole_axis(
     }
     // A membrane lying on the data everywhere has nothing to gain from
     // another axis; one spanning a hole or a cavity opening has.
-    let point_tree = kd_tree(&prep.points);
-    if support(&first, &point_tree) >= cfg.pole_axis_support {
+    if support(&first, &prep.points) >= cfg.pole_axis_support {
         return Ok(first);
     }
     let (lo, hi) = init::quantile_bounds(&prep.points, cfg.init_quantile);
@@ -352,12 +352,6 @@ fn select_pole_axis(
     Ok(best)
 }
 
-/// A kd-tree over `points`.
-fn kd_tree(points: &[Vec3]) -> kiddo::ImmutableKdTree<f64, 3> {
-    let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
-    kiddo::ImmutableKdTree::new_from_slice(&coords)
-}
-
 /// Mean edge length of a mesh: the tolerance of [`support`] and
 /// [`selection_score`].
 fn mean_edge(mesh: &TriMesh) -> f64 {
@@ -369,24 +363,16 @@ fn mean_edge(mesh: &TriMesh) -> f64 {
         / mesh.triangles.len().max(1) as f64
 }
 
-/// Share of the mesh's vertices within one mean mesh edge of a used point
-/// (`points` is their kd-tree): below 1 where the membrane spans space
-/// without data, such as a torus's hole or a cup's opening.
-fn support(rec: &Reconstruction, points: &kiddo::ImmutableKdTree<f64, 3>) -> f64 {
+/// Share of the mesh's vertices within one mean mesh edge of a used point:
+/// below 1 where the membrane spans space without data, such as a torus's
+/// hole or a cup's opening.
+fn support(rec: &Reconstruction, points: &[Vec3]) -> f64 {
     let v = &rec.mesh.vertices;
-    if v.is_empty() {
+    if v.is_empty() || points.is_empty() {
         return 0.0;
     }
-    let tol2 = mean_edge(&rec.mesh).powi(2);
-    let near = v
-        .iter()
-        .filter(|p| {
-            points
-                .nearest_one::<kiddo::SquaredEuclidean>(&[p.x, p.y, p.z])
-                .distance
-                <= tol2
-        })
-        .count();
+    let tol = mean_edge(&rec.mesh);
+    let near = nearest(points, v).iter().filter(|(d, _)| *d <= tol).count();
     near as f64 / v.len() as f64
 }
 
@@ -403,16 +389,12 @@ fn selection_score(rec: &Reconstruction, points: &[Vec3]) -> f64 {
     if rec.mesh.vertices.is_empty() || points.is_empty() || rec.mesh.triangles.is_empty() {
         return 0.0;
     }
-    let tol2 = mean_edge(&rec.mesh).powi(2);
-    let tree = kd_tree(&rec.mesh.vertices);
+    let tol = mean_edge(&rec.mesh);
     let step = points.len().div_ceil(COVERAGE_QUERIES).max(1);
-    let (mut hit, mut n) = (0usize, 0usize);
-    for p in points.iter().step_by(step) {
-        let d2 = tree
-            .nearest_one::<kiddo::SquaredEuclidean>(&[p.x, p.y, p.z])
-            .distance;
-        hit += usize::from(d2 <= tol2);
-        n += 1;
-    }
-    rec.report.eta_final * hit as f64 / n.max(1) as f64
+    let queries: Vec<Vec3> = points.iter().step_by(step).copied().collect();
+    let hit = nearest(&rec.mesh.vertices, &queries)
+        .iter()
+        .filter(|(d, _)| *d <= tol)
+        .count();
+    rec.report.eta_final * hit as f64 / queries.len() as f64
 }
