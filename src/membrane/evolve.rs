@@ -1128,24 +1128,30 @@ pub(crate) fn evolve(
     };
     // The poles' coordinate axis, resolved once (reported; the octagon
     // takes it explicitly).
-    let pole_axis =
-        pole.unwrap_or_else(|| init::pole_axis_of(points, cfg.pole_axis, cfg.init_quantile));
-    let mut surface = match warm {
+    // The poles' coordinate axis: a warm start's from its own poles (no pass
+    // over the points on the per-frame path), a cold start's resolved once
+    // and given to the octagon explicitly.
+    let (mut surface, pole_axis) = match warm {
         Some(w) => {
             let mut s = w.surface.clone();
             s.fix_orientation();
-            s
+            let [a, b] = s.poles();
+            let axis = (b - a).abs().imax();
+            (s, axis)
         }
         None => {
+            let pole_axis = pole
+                .unwrap_or_else(|| init::pole_axis_of(points, cfg.pole_axis, cfg.init_quantile));
             let [m, l] = cfg.grid_start;
             let fit = fits.get(cfg, m, l)?;
-            octagon(
+            let surface = octagon(
                 points,
                 [PoleAxis::X, PoleAxis::Y, PoleAxis::Z][pole_axis],
                 cfg.init_quantile,
                 cfg.init_margin,
                 fit,
-            )?
+            )?;
+            (surface, pole_axis)
         }
     };
     times.init_ms = ms(t_init);

@@ -226,7 +226,7 @@ pub struct Report {
     /// Whether it started from a warm start.
     pub warm: bool,
     /// Coordinate axis (0 = x, 1 = y, 2 = z) of the initial surface's poles
-    /// (for a warm start, the axis the configuration resolves to).
+    /// (for a warm start, the axis nearest the line through its poles).
     pub pole_axis: usize,
     /// Pole axes tried (`pole_axis_candidates`; 1 when only one ran).
     pub pole_axes_tried: usize,
