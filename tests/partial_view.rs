@@ -31,7 +31,7 @@ fn replay(shapes: &[&str], frames: usize, sets: &[&str]) -> Vec<ScoredFrame> {
     let mut sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
     sets.push("pipeline.deadline_ms=0".into());
     let cfg = Config::load(None, &sets).unwrap();
-    let out = replay_scored(&bag, &cfg, false).unwrap();
+    let out = replay_scored(&bag, &cfg, 0).unwrap();
     for f in &out {
         let s = f.score.unwrap();
         eprintln!(

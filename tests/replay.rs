@@ -203,7 +203,7 @@ fn scored(file: &str, sets: &[&str]) -> Vec<sepmem::pipeline::score::ScoredFrame
     let bag = Bag::open(&common::data_dir().join("bags").join(file)).unwrap();
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
     let cfg = Config::load(None, &sets).unwrap();
-    sepmem::pipeline::score::replay_scored(&bag, &cfg, false).unwrap()
+    sepmem::pipeline::score::replay_scored(&bag, &cfg, 0).unwrap()
 }
 
 #[test]
@@ -277,12 +277,14 @@ fn warm_frames_track_the_cold_quality_of_the_same_frame() {
     let dfs = |sets: &[&str]| -> Vec<f64> {
         let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
         let cfg = Config::load(None, &sets).unwrap();
-        let frames = sepmem::pipeline::score::replay_scored(&bag, &cfg, true).unwrap();
+        let frames = sepmem::pipeline::score::replay_scored(&bag, &cfg, 1).unwrap();
         frames
             .iter()
             .filter(|f| f.result.path == StartPath::Warm)
             .map(|f| {
-                let (cold_it, cold) = f.cold.expect("compared with a cold start");
+                let [(cold_it, cold)] = f.cold[..] else {
+                    panic!("one cold reference per frame, got {}", f.cold.len())
+                };
                 assert!(
                     4 * f.result.iterations <= cold_it,
                     "frame {}",
@@ -311,6 +313,50 @@ fn warm_frames_track_the_cold_quality_of_the_same_frame() {
         "alignment should matter: dF {} with the centroid shift only vs {} tracked",
         mean(&shifted),
         mean(&tracked)
+    );
+}
+
+#[test]
+fn cold_references_on_other_thinning_subsets_measure_the_reference_spread() {
+    // Thinned to 1,500 of about 2,000-2,500 points per frame, three cold
+    // starts per frame on three pseudo-random subsets. The first is the
+    // pipeline's own subset: on the first frame (a cold start in the
+    // pipeline too) it reproduces the pipeline's result exactly. The
+    // others are different inputs, so the references spread.
+    let bag = Bag::open(&common::data_dir().join("bags").join("synth_ellipsoid.mcap")).unwrap();
+    let cfg = Config::load(
+        None,
+        &[
+            "pipeline.deadline_ms=0".to_string(),
+            "pipeline.max_points=1500".to_string(),
+        ],
+    )
+    .unwrap();
+    let frames = sepmem::pipeline::score::replay_scored(&bag, &cfg, 3).unwrap();
+    assert_eq!(frames.len(), 12);
+    let first = &frames[0];
+    assert_eq!(first.result.path, StartPath::Cold);
+    let (it0, s0) = first.cold[0];
+    assert_eq!(it0, first.result.iterations);
+    assert_eq!(
+        s0.unwrap().fscore,
+        first.score.unwrap().fscore,
+        "reference 0 is the pipeline's own cold start"
+    );
+    let mut spreads = Vec::new();
+    for f in &frames {
+        assert_eq!(f.cold.len(), 3, "frame {}", f.result.frame);
+        let fs: Vec<f64> = f.cold.iter().map(|(_, s)| s.unwrap().fscore).collect();
+        let lo = fs.iter().copied().fold(f64::MAX, f64::min);
+        let hi = fs.iter().copied().fold(f64::MIN, f64::max);
+        // Every reference is a sane reconstruction of the same view.
+        assert!(lo > 0.35, "frame {}: {fs:?}", f.result.frame);
+        spreads.push(hi - lo);
+    }
+    eprintln!("cold reference spread per frame: {spreads:.3?}");
+    assert!(
+        spreads.iter().any(|&s| s > 0.0),
+        "three subsets gave identical cold starts on every frame"
     );
 }
 

@@ -12,17 +12,20 @@
 //! deadline, the cold iteration cap) outside the timed pipeline, and reports
 //! per warm frame ΔF = F_cold − F_warm and the ratio of warm to cold
 //! iterations: the acceptance check (ΔF ≤ 0.01 with at most a
-//! quarter of the cold iterations).
+//! quarter of the cold iterations). `--cold-repeats N` makes `F_cold` the
+//! mean of `N` cold starts on different thinning subsets of the frame and
+//! reports how often one cold start reaches the others' mean within 0.01:
+//! on a single view a cold start's F-score moves by about ±0.02 with which
+//! points were kept, so this is the resolution of the reference itself.
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use sepmem::bag::{Bag, BagWriter};
 use sepmem::config::Config;
-use sepmem::membrane::{self, Budget};
 use sepmem::pipeline::engine::{decode_sample, Engine};
-use sepmem::pipeline::score::{score_frame, FrameScore, ScoreConfig};
-use sepmem::pipeline::{cold_cap, outputs, thinned, StartPath};
+use sepmem::pipeline::score::{cold_references, score_frame, FrameScore, ScoreConfig};
+use sepmem::pipeline::{outputs, StartPath};
 use sepmem::synth::truth::GroundTruthIndex;
 use sepmem::transport::keys::expand_topic_template;
 use std::collections::BTreeMap;
@@ -53,6 +56,13 @@ pub struct ReplayArgs {
     /// frame, ΔF = F_cold − F_warm and the warm/cold iteration ratio.
     #[arg(long)]
     pub compare_cold: bool,
+    /// With --compare-cold: cold starts per frame, each on another
+    /// pseudo-random thinning subset of the same size (the first is the
+    /// pipeline's own). F_cold is then their mean, and the summary also
+    /// says how often one cold start reaches the others' mean within 0.01
+    /// (how reproducible the cold reference itself is).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=16))]
+    pub cold_repeats: u64,
     /// Print only the summary.
     #[arg(short, long)]
     pub quiet: bool,
@@ -73,6 +83,7 @@ pub fn run_args(a: &ReplayArgs) -> Result<()> {
             quiet: a.quiet,
             score: !a.no_score,
             compare_cold: a.compare_cold,
+            cold_repeats: a.cold_repeats as usize,
         },
     )
 }
@@ -86,6 +97,9 @@ pub struct Options {
     pub score: bool,
     /// Reconstruct every frame cold too and compare (needs ground truth for ΔF).
     pub compare_cold: bool,
+    /// Cold starts per frame with `compare_cold` (at least 1; see
+    /// [`sepmem::pipeline::score::cold_references`]).
+    pub cold_repeats: usize,
 }
 
 /// Per-stream accumulators of the summary.
@@ -94,6 +108,10 @@ struct StreamSummary {
     scores: Vec<FrameScore>,
     /// (ΔF, warm/cold iteration ratio) of warm frames.
     warm_vs_cold: Vec<(f64, f64)>,
+    /// Over the warm frames' cold references (with more than one per
+    /// frame): how many reached the mean F of the frame's other cold
+    /// references within 0.01, of how many.
+    cold_vs_cold: (usize, usize),
 }
 
 const POINTCLOUD2: &str = "sensor_msgs/msg/PointCloud2";
@@ -193,7 +211,10 @@ pub fn run_opts(
         );
     }
     if opts.compare_cold {
-        header += &format!(" {:>7} {:>4} {:>7} {:>5}", "F_cold", "it_c", "dF", "ratio");
+        header += &format!(" {:>7} {:>5} {:>7} {:>5}", "F_cold", "it_c", "dF", "ratio");
+        if opts.cold_repeats > 1 {
+            header += &format!(" {:>6}", "spread");
+        }
     }
     print(header);
     let (mut latencies, mut warm_it, mut cold_it) = (Vec::new(), Vec::new(), Vec::new());
@@ -259,31 +280,39 @@ pub fn run_opts(
                         line += &format!(" {:>6} {:>6} {:>6} {:>7} {:>5}", "-", "-", "-", "-", "-");
                     }
                     if opts.compare_cold {
-                        let budget = Budget {
-                            max_iterations: Some(cold_cap(&cfg.membrane, p)),
-                            deadline: None,
-                            min_iterations: 0,
-                        };
-                        let cold = membrane::reconstruct(
-                            &thinned(&sc.cloud, p),
-                            &cfg.membrane,
-                            &budget,
-                            None,
-                        )
-                        .with_context(|| format!("cold reference of {id} frame {}", r.frame))?;
-                        let it_c = cold.report.iterations;
-                        let f_cold = match &gt {
-                            Some(gt) => {
-                                score_frame(&cold.mesh, gt, &sc.cloud.points, &score_cfg)?.fscore
-                            }
-                            None => f64::NAN,
-                        };
+                        let refs = cold_references(&sc.cloud, cfg, opts.cold_repeats.max(1))
+                            .with_context(|| format!("cold reference of {id} frame {}", r.frame))?;
+                        let mut f_refs = Vec::with_capacity(refs.len());
+                        for c in &refs {
+                            f_refs.push(match &gt {
+                                Some(gt) => {
+                                    score_frame(&c.mesh, gt, &sc.cloud.points, &score_cfg)?.fscore
+                                }
+                                None => f64::NAN,
+                            });
+                        }
+                        let it_c = refs.iter().map(|c| c.report.iterations as f64).sum::<f64>()
+                            / refs.len() as f64;
+                        let f_cold = mean(&f_refs);
                         let df = f_cold - score.map_or(f64::NAN, |s| s.fscore);
-                        let ratio = r.iterations as f64 / it_c.max(1) as f64;
+                        let ratio = r.iterations as f64 / it_c.max(1.0);
                         if r.path == StartPath::Warm {
                             entry.warm_vs_cold.push((df, ratio));
+                            if f_refs.len() > 1 {
+                                let sum: f64 = f_refs.iter().sum();
+                                let others = (f_refs.len() - 1) as f64;
+                                let reached = f_refs
+                                    .iter()
+                                    .filter(|&&f| f >= (sum - f) / others - 0.01)
+                                    .count();
+                                entry.cold_vs_cold.0 += reached;
+                                entry.cold_vs_cold.1 += f_refs.len();
+                            }
                         }
-                        line += &format!(" {f_cold:>7.3} {it_c:>4} {df:>+7.3} {ratio:>5.2}");
+                        line += &format!(" {f_cold:>7.3} {it_c:>5.1} {df:>+7.3} {ratio:>5.2}");
+                        if f_refs.len() > 1 {
+                            line += &format!(" {:>6.3}", max(&f_refs) - min(&f_refs));
+                        }
                     }
                     print(line);
                     if let Some(dir) = outputs_to.meshes {
@@ -376,7 +405,7 @@ pub fn run_opts(
                 .iter()
                 .filter(|(d, r)| *d <= 0.01 && *r <= 0.25)
                 .count();
-            println!(
+            let mut summary = format!(
                 "warm vs cold {id}: {} warm frames; dF = F_cold - F_warm mean {:+.4} max {:+.4}; iteration ratio mean {:.3} max {:.3}; {pass}/{} warm frames within dF <= 0.01 at <= 1/4 of the cold iterations",
                 df.len(),
                 mean(&df),
@@ -385,6 +414,13 @@ pub fn run_opts(
                 max(&ratio),
                 df.len(),
             );
+            if opts.cold_repeats > 1 {
+                summary += &format!(
+                    " (F_cold: mean of {} cold starts on different thinning subsets); cold vs cold: {}/{} cold starts within 0.01 of the other subsets' mean",
+                    opts.cold_repeats, st.cold_vs_cold.0, st.cold_vs_cold.1
+                );
+            }
+            println!("{summary}");
         }
     }
     if let Some(w) = writer {

@@ -601,13 +601,25 @@ impl PipelineConfig {
 /// multiplicative hash of the point index (deterministic, and without the
 /// stripes a fixed stride leaves in an organised, row-major cloud).
 pub fn thinned<'a>(cloud: &'a PointCloud, cfg: &PipelineConfig) -> Cow<'a, PointCloud> {
+    thinned_subset(cloud, cfg, 0)
+}
+
+/// [`thinned`] with another hash: subset 0 is the pipeline's own, others
+/// are independent pseudo-random subsets of the same size (for measuring
+/// how much a reconstruction depends on which points were kept).
+pub fn thinned_subset<'a>(
+    cloud: &'a PointCloud,
+    cfg: &PipelineConfig,
+    subset: u64,
+) -> Cow<'a, PointCloud> {
     if cfg.max_points == 0 || cloud.len() <= cfg.max_points {
         return Cow::Borrowed(cloud);
     }
     let keep = cfg.max_points as f64 / cloud.len() as f64;
+    let salt = 0x5851_F42D_4C95_7F2D ^ subset.wrapping_mul(0xD1B5_4A32_D192_ED03);
     let idx: Vec<usize> = (0..cloud.len())
         .filter(|&i| {
-            let h = (i as u64 ^ 0x5851_F42D_4C95_7F2D).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11;
+            let h = (i as u64 ^ salt).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11;
             (h as f64) < keep * (1u64 << 53) as f64
         })
         .collect();
@@ -703,8 +715,25 @@ mod tests {
         assert!(matches!(thinned(&cloud, &off), Cow::Borrowed(_)));
         let big = PipelineConfig {
             max_points: 20_000,
-            ..cfg
+            ..cfg.clone()
         };
         assert!(matches!(thinned(&cloud, &big), Cow::Borrowed(_)));
+        // Subset 0 is `thinned`; another subset is as large, deterministic,
+        // and independent of it (overlap about keep² of the cloud: 1,250).
+        assert_eq!(thinned_subset(&cloud, &cfg, 0).points, t.points);
+        let other = thinned_subset(&cloud, &cfg, 1);
+        assert!((4_700..=5_300).contains(&other.len()), "{}", other.len());
+        assert_eq!(thinned_subset(&cloud, &cfg, 1).points, other.points);
+        let first: std::collections::HashSet<[u64; 2]> = t
+            .points
+            .iter()
+            .map(|p| [p.x.to_bits(), p.y.to_bits()])
+            .collect();
+        let shared = other
+            .points
+            .iter()
+            .filter(|p| first.contains(&[p.x.to_bits(), p.y.to_bits()]))
+            .count();
+        assert!((1_000..=1_500).contains(&shared), "{shared} shared points");
     }
 }
