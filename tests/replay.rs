@@ -201,9 +201,13 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
 /// ground-truth side channel.
 fn scored(file: &str, sets: &[&str]) -> Vec<sepmem::pipeline::score::ScoredFrame> {
     let bag = Bag::open(&common::data_dir().join("bags").join(file)).unwrap();
+    sepmem::pipeline::score::replay_scored(&bag, &config(sets), 0).unwrap()
+}
+
+/// The embedded defaults with `section.key=value` overrides.
+fn config(sets: &[&str]) -> Config {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-    let cfg = Config::load(None, &sets).unwrap();
-    sepmem::pipeline::score::replay_scored(&bag, &cfg, 0).unwrap()
+    Config::load(None, &sets).unwrap()
 }
 
 #[test]
@@ -275,9 +279,7 @@ fn warm_frames_track_the_cold_quality_of_the_same_frame() {
     // warm frames run their iteration cap (a quarter of a cold start's).
     let bag = Bag::open(&common::data_dir().join("bags").join("synth_ellipsoid.mcap")).unwrap();
     let dfs = |sets: &[&str]| -> Vec<f64> {
-        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-        let cfg = Config::load(None, &sets).unwrap();
-        let frames = sepmem::pipeline::score::replay_scored(&bag, &cfg, 1).unwrap();
+        let frames = sepmem::pipeline::score::replay_scored(&bag, &config(sets), 1).unwrap();
         frames
             .iter()
             .filter(|f| f.result.path == StartPath::Warm)
@@ -338,14 +340,7 @@ fn every_warm_frame_of_a_20000_point_sequence_reaches_the_cold_f_score_of_its_fr
     };
     sepmem::synth::sequence::write_sequence(&spec, &path, |_| {}).unwrap();
     let bag = Bag::open(&path).unwrap();
-    let cfg = Config::load(
-        None,
-        &[
-            "pipeline.deadline_ms=0".to_string(),
-            "membrane.threads=1".to_string(),
-        ],
-    )
-    .unwrap();
+    let cfg = config(&["pipeline.deadline_ms=0", "membrane.threads=1"]);
     let frames = sepmem::pipeline::score::replay_scored(&bag, &cfg, 1).unwrap();
     assert_eq!(frames.len(), 20);
     let mut dfs = Vec::new();
@@ -382,14 +377,7 @@ fn cold_references_on_other_thinning_subsets_measure_the_reference_spread() {
     // pipeline too) it reproduces the pipeline's result exactly. The
     // others are different inputs, so the references spread.
     let bag = Bag::open(&common::data_dir().join("bags").join("synth_ellipsoid.mcap")).unwrap();
-    let cfg = Config::load(
-        None,
-        &[
-            "pipeline.deadline_ms=0".to_string(),
-            "pipeline.max_points=1500".to_string(),
-        ],
-    )
-    .unwrap();
+    let cfg = config(&["pipeline.deadline_ms=0", "pipeline.max_points=1500"]);
     let frames = sepmem::pipeline::score::replay_scored(&bag, &cfg, 3).unwrap();
     assert_eq!(frames.len(), 12);
     let first = &frames[0];
