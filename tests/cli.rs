@@ -1,6 +1,7 @@
-//! The `sepmem reconstruct`, `filter` and `eval` subcommands, run as the
-//! built binary on files written to a temporary folder: the reconstruction is
-//! scored against the ground truth by `eval`, the filter's PLY is read back.
+//! The `sepmem reconstruct`, `filter`, `eval` and `replay` subcommands, run
+//! as the built binary on files written to a temporary folder: the
+//! reconstruction is scored against the ground truth by `eval`, the filter's
+//! PLY is read back, a replay of a committed bag is repeated.
 #![allow(clippy::unwrap_used)]
 
 use sepmem::cloud::{Attribute, PointCloud, Vec3};
@@ -239,4 +240,73 @@ fn bad_input_fails_with_a_message_naming_the_file() {
         "{}",
         text(&o)
     );
+}
+
+/// Per-frame rows of a `sepmem replay` table without the wall-clock column
+/// (`ms`, the 8th): stream, frame, points, path, reason, iterations, η_g and
+/// the scores.
+fn replay_rows(o: &Output) -> Vec<Vec<String>> {
+    String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .filter(|l| l.starts_with('/'))
+        .map(|l| {
+            l.split_whitespace()
+                .enumerate()
+                .filter(|(k, _)| *k != 7)
+                .map(|(_, c)| c.to_string())
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn replay_is_deterministic_and_applies_the_deadlines_only_with_realtime() {
+    let bag = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/bags/synth_ellipsoid.mcap");
+    // A per-frame deadline that has passed before any iteration could run.
+    let args = |realtime: bool| {
+        let mut a = vec![
+            "replay",
+            p(&bag),
+            "--set",
+            "pipeline.deadline_ms=0.000001",
+            "--set",
+            "pipeline.cold_deadline_ms=0",
+            "--set",
+            "pipeline.warm_min_iterations=0",
+            "--set",
+            "pipeline.warm_eta_ratio=0",
+        ];
+        if realtime {
+            a.push("--realtime");
+        }
+        a
+    };
+    let first = sepmem(&args(false));
+    assert!(first.status.success(), "{}", text(&first));
+    let stdout = String::from_utf8_lossy(&first.stdout).to_string();
+    assert!(
+        stdout.contains("no deadline (deterministic"),
+        "{}",
+        text(&first)
+    );
+    let rows = replay_rows(&first);
+    assert_eq!(rows.len(), 12, "{}", text(&first));
+    // Without --realtime the deadline is not applied: every frame iterates
+    // (warm frames their cap of 4, the cold first frame more).
+    for r in &rows {
+        let it: usize = r[5].parse().unwrap();
+        assert!(it >= 4, "{r:?}");
+    }
+    // Deterministic: a second run gives the same table (timings aside).
+    let second = sepmem(&args(false));
+    assert_eq!(replay_rows(&second), rows);
+    // --realtime applies it: no frame gets an iteration.
+    let late = sepmem(&args(true));
+    assert!(late.status.success(), "{}", text(&late));
+    assert!(String::from_utf8_lossy(&late.stdout).contains("deadlines 0.000001 ms warm"));
+    let late_rows = replay_rows(&late);
+    assert_eq!(late_rows.len(), 12);
+    for r in &late_rows {
+        assert_eq!(r[5], "0", "{r:?}");
+    }
 }

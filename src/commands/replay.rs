@@ -1,6 +1,13 @@
 //! `sepmem replay`: run the frame pipeline over every PointCloud2 of a bag,
 //! deterministically, with no network, as fast as possible.
 //!
+//! Deterministic means no wall-clock deadline: each frame runs until its
+//! iteration cap or convergence, so the same bag and configuration give
+//! the same meshes and scores on any machine, at any load. `--realtime`
+//! applies the node's per-frame deadlines instead (`pipeline.deadline_ms`,
+//! `cold_deadline_ms`), to see what a loaded node would publish. The
+//! latency summary is measured either way.
+//!
 //! When the bag carries ground truth (`sepmem_msgs/msg/GroundTruth`, as
 //! written by `sepmem synth`), every frame of every stream is scored against
 //! the posed ground-truth mesh ([`sepmem::pipeline::score`]): F-score,
@@ -63,6 +70,14 @@ pub struct ReplayArgs {
     /// (how reproducible the cold reference itself is).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=16))]
     pub cold_repeats: u64,
+    /// Apply the per-frame deadlines (`pipeline.deadline_ms`,
+    /// `cold_deadline_ms`) as `sepmem node` does: how many iterations a
+    /// frame gets then depends on the machine's speed and load. Without
+    /// it a replay has no deadline, only the iteration caps, and is
+    /// deterministic: the same bag and configuration give the same meshes
+    /// on any machine.
+    #[arg(long)]
+    pub realtime: bool,
     /// Print only the summary.
     #[arg(short, long)]
     pub quiet: bool,
@@ -70,7 +85,11 @@ pub struct ReplayArgs {
 
 /// Run `sepmem replay` from its arguments.
 pub fn run_args(a: &ReplayArgs) -> Result<()> {
-    let cfg = Config::load(a.config.as_deref(), &a.set)?;
+    let mut cfg = Config::load(a.config.as_deref(), &a.set)?;
+    if !a.realtime {
+        // 0 disables every deadline (warm and cold).
+        cfg.pipeline.deadline_ms = 0.0;
+    }
     run_opts(
         &a.bag,
         Outputs {
@@ -362,7 +381,7 @@ pub fn run_opts(
     bar.finish_and_clear();
     latencies.sort_by(f64::total_cmp);
     println!(
-        "summary: {} samples, {} frames ok ({} warm, {} cold), {} failed, {} bad samples; latency ms p50 {:.1} p95 {:.1} max {:.1}; mean iterations warm {:.1} cold {:.1}",
+        "summary: {} samples, {} frames ok ({} warm, {} cold), {} failed, {} bad samples; latency ms p50 {:.1} p95 {:.1} max {:.1}; mean iterations warm {:.1} cold {:.1}; {}",
         messages.len(),
         latencies.len(),
         warm_it.len(),
@@ -374,6 +393,15 @@ pub fn run_opts(
         latencies.last().copied().unwrap_or(f64::NAN),
         mean(&warm_it),
         mean(&cold_it),
+        if p.deadline_ms > 0.0 {
+            format!(
+                "deadlines {} ms warm, {} ms cold",
+                p.deadline_ms,
+                p.cold_budget_ms()
+            )
+        } else {
+            "no deadline (deterministic; --realtime applies pipeline.deadline_ms)".to_string()
+        },
     );
     for (id, st) in &per_stream {
         if !st.scores.is_empty() {
