@@ -25,6 +25,11 @@
 //! visible shell): the ratio of the predicted to the true extent along the
 //! viewing ray (camera at the origin of the cloud frame, looking at the
 //! ground truth's centre) and the ratio of the enclosed volumes.
+//!
+//! The warm-versus-cold check compares a warm-started frame with cold
+//! starts of the same frame ([`cold_references`]), optionally several on
+//! different thinning subsets, whose spread is the resolution of the
+//! cold reference itself.
 
 use crate::cloud::{Aabb, Vec3};
 use crate::mesh::TriMesh;
