@@ -1126,8 +1126,6 @@ pub(crate) fn evolve(
         },
         map: HashMap::new(),
     };
-    // The poles' coordinate axis, resolved once (reported; the octagon
-    // takes it explicitly).
     // The poles' coordinate axis: a warm start's from its own poles (no pass
     // over the points on the per-frame path), a cold start's resolved once
     // and given to the octagon explicitly.

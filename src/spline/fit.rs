@@ -329,7 +329,7 @@ pub fn redistribute(
     along_u: bool,
     cum: &[f64],
 ) -> Result<ClosedSurface, SplineError> {
-    let lay = system.layout().clone();
+    let lay = system.layout();
     let n = cum.len().saturating_sub(1).max(1);
     let total = cum.last().copied().unwrap_or(0.0);
     let remap = |t: f64| {
