@@ -68,7 +68,7 @@ pub struct ReplayArgs {
     /// pipeline's own). F_cold is then their mean, and the summary also
     /// says how often one cold start reaches the others' mean within 0.01
     /// (how reproducible the cold reference itself is).
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=16))]
+    #[arg(long, default_value_t = 1, requires = "compare_cold", value_parser = clap::value_parser!(u64).range(1..=16))]
     pub cold_repeats: u64,
     /// Apply the per-frame deadlines (`pipeline.deadline_ms`,
     /// `cold_deadline_ms`) as `sepmem node` does: how many iterations a
