@@ -23,6 +23,7 @@
 //! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
 //! | [`bench`] | `sepmem bench`: the paper's evaluation, reproduced (input conditions, runner, reports) |
 //! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
+//! | [`model`] | the per-object model fused over frames: voxel point memory and the free space of its views |
 //! | [`membrane`] | the separability membrane: initialisation, evolution, dynamic adjustment, mesh extraction |
 //! | [`spline`] | the closed cubic B-spline surface (Eq. 10), its least-squares fit and growth |
 //! | [`bag`] | rosbag2 bags: MCAP and sqlite3 reading, MCAP writing with ROS 2 schemas |
@@ -42,6 +43,7 @@ pub mod io;
 pub mod membrane;
 pub mod mesh;
 pub mod metrics;
+pub mod model;
 pub mod node;
 pub mod normals;
 pub mod pipeline;

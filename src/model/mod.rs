@@ -1,0 +1,310 @@
+//! The per-object model fused over frames, in the object's own frame.
+//!
+//! One depth camera sees one side of an object per frame. A tracker that
+//! reconstructs each frame on its own forgets what the earlier views showed
+//! (issue "the robot's view": the last third of a 180° turn scores no
+//! better than the first). An [`ObjectModel`] keeps, per tracked object:
+//!
+//! - a **point memory** ([`voxels`]): one running mean per occupied voxel of
+//!   the object's frame, with hit count and last-seen frame, so the fused
+//!   cloud is evenly dense (one point per voxel) and its size is bounded;
+//! - **free-space evidence** ([`views`]): the angular depth images of a
+//!   bounded set of views, so that a place any view saw through is known
+//!   empty, and the unseen side can be carved by all views together.
+//!
+//! Each frame's points are registered into the object's frame with the
+//! tracked motion (`object_to_sensor`) and [`ObjectModel::integrate`]d:
+//! voxels the current view sees *through* are contradicted (and forgotten
+//! after `forget_after` such frames without a hit); when more than
+//! `reset_share` of the voxels the view could judge are contradicted, the
+//! object changed or was swapped and the model restarts from this view. A
+//! cold restart of the tracker calls [`ObjectModel::reset`].
+//!
+//! Memory per object is bounded by `max_voxels · VOXEL_BYTES +
+//! max_views · 4 · view_side²` bytes ([`ModelConfig::max_bytes`]).
+
+pub mod views;
+pub mod voxels;
+
+use crate::cloud::Vec3;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+use views::{DepthView, Evidence, ViewSet};
+use voxels::VoxelMemory;
+
+/// A rigid motion `p ↦ R p + t` (object frame to sensor frame).
+pub type Rigid = nalgebra::Isometry3<f64>;
+
+/// Bytes one stored voxel costs at most (key, voxel, table control byte,
+/// and the table's spare capacity).
+pub const VOXEL_BYTES: usize = 2 * (std::mem::size_of::<(voxels::VoxelKey, voxels::Voxel)>() + 1);
+
+/// An invalid model configuration, naming the key.
+#[derive(Debug, Error, Clone, PartialEq)]
+#[error("model.{key}: {reason}")]
+pub struct ModelConfigError {
+    /// The offending key.
+    pub key: &'static str,
+    /// What is wrong with it.
+    pub reason: String,
+}
+
+/// Parameters of the fused model (`model` section; absent: no fusion).
+/// Validated on parsing: a `ModelConfig` always holds usable values.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "ModelParams", into = "ModelParams")]
+pub struct ModelConfig(ModelParams);
+
+/// The `model` keys as written (see `launch/sepmem.json5`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ModelParams {
+    /// Voxel edge, as a fraction of the object's longest edge.
+    pub voxel: f64,
+    /// Most voxels one object keeps (the least recently seen go first).
+    pub max_voxels: usize,
+    /// Most views whose free space one object keeps.
+    pub max_views: usize,
+    /// Largest side of a view's depth image, in bins.
+    pub view_side: usize,
+    /// A view within this angle of a kept one replaces it, in degrees.
+    pub view_angle_deg: f64,
+    /// Weight of the current frame's mean in a voxel it hits, in (0, 1].
+    pub current_weight: f32,
+    /// Thickness of the seen surface, in point spacings δ of each view.
+    pub margin: f64,
+    /// A voxel seen through in this many frames without a hit is forgotten.
+    pub forget_after: u16,
+    /// Restart the model when more than this share of the judged voxels is seen through.
+    pub reset_share: f64,
+    /// ... but only when the view judged at least this many voxels.
+    pub reset_min_voxels: usize,
+}
+
+impl Default for ModelParams {
+    fn default() -> Self {
+        Self {
+            voxel: 0.008,
+            max_voxels: 60_000,
+            max_views: 12,
+            view_side: 160,
+            view_angle_deg: 20.0,
+            current_weight: 0.6,
+            margin: 2.0,
+            forget_after: 2,
+            reset_share: 0.5,
+            reset_min_voxels: 50,
+        }
+    }
+}
+
+fn bad(key: &'static str, reason: impl Into<String>) -> ModelConfigError {
+    ModelConfigError {
+        key,
+        reason: reason.into(),
+    }
+}
+
+fn fraction(key: &'static str, v: f64) -> Result<f64, ModelConfigError> {
+    if v > 0.0 && v < 1.0 {
+        Ok(v)
+    } else {
+        Err(bad(key, format!("{v} is not in (0, 1)")))
+    }
+}
+
+impl TryFrom<ModelParams> for ModelConfig {
+    type Error = ModelConfigError;
+
+    fn try_from(r: ModelParams) -> Result<Self, Self::Error> {
+        fraction("voxel", r.voxel)?;
+        fraction("reset_share", r.reset_share)?;
+        if !(r.current_weight > 0.0 && r.current_weight <= 1.0) {
+            return Err(bad("current_weight", "must be in (0, 1]"));
+        }
+        if !(r.margin >= 0.0 && r.margin.is_finite()) {
+            return Err(bad(
+                "margin",
+                "must be a finite number of point spacings >= 0",
+            ));
+        }
+        if !(1.0..=90.0).contains(&r.view_angle_deg) {
+            return Err(bad("view_angle_deg", "must be in [1, 90]"));
+        }
+        for (key, v) in [("max_voxels", r.max_voxels), ("max_views", r.max_views)] {
+            if v == 0 {
+                return Err(bad(key, "must be at least 1"));
+            }
+        }
+        if r.forget_after == 0 {
+            return Err(bad("forget_after", "must be at least 1"));
+        }
+        if !(8..=2048).contains(&r.view_side) {
+            return Err(bad("view_side", "must be in [8, 2048] bins"));
+        }
+        Ok(Self(r))
+    }
+}
+
+impl From<ModelConfig> for ModelParams {
+    fn from(c: ModelConfig) -> Self {
+        c.0
+    }
+}
+
+impl Default for ModelConfig {
+    /// The defaults of [`ModelParams`] (valid: a test parses them).
+    fn default() -> Self {
+        Self(ModelParams::default())
+    }
+}
+
+impl ModelConfig {
+    /// The validated keys.
+    pub fn params(&self) -> &ModelParams {
+        &self.0
+    }
+
+    /// The most bytes one object's model holds.
+    pub fn max_bytes(&self) -> usize {
+        let p = &self.0;
+        p.max_voxels * VOXEL_BYTES + p.max_views * 4 * p.view_side * p.view_side
+    }
+}
+
+/// What one [`ObjectModel::integrate`] did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Integration {
+    /// Voxels the frame's points hit.
+    pub voxels_hit: usize,
+    /// Stored voxels the view could judge (in its field, not hidden).
+    pub voxels_tested: usize,
+    /// Of those, the voxels the view saw through.
+    pub voxels_contradicted: usize,
+    /// The model restarted from this view (the object changed).
+    pub reset: bool,
+}
+
+/// One object's fused observations (see the module docs).
+#[derive(Debug, Clone)]
+pub struct ObjectModel {
+    cfg: ModelConfig,
+    memory: VoxelMemory,
+    views: ViewSet,
+    frame: u32,
+}
+
+impl ObjectModel {
+    /// An empty model of an object whose longest edge is `object_size` metres.
+    pub fn new(cfg: ModelConfig, object_size: f64) -> Self {
+        let size = if object_size > 0.0 && object_size.is_finite() {
+            object_size
+        } else {
+            1.0
+        };
+        let memory = VoxelMemory::new(cfg.0.voxel * size, cfg.0.max_voxels);
+        Self {
+            cfg,
+            memory,
+            views: ViewSet::default(),
+            frame: 0,
+        }
+    }
+
+    /// Fuse one frame: `points` in the sensor's frame (the camera at the
+    /// origin), `object_to_sensor` the tracked pose of the object.
+    pub fn integrate(&mut self, points: &[Vec3], object_to_sensor: &Rigid) -> Integration {
+        let to_object = object_to_sensor.inverse();
+        let local: Vec<Vec3> = points
+            .iter()
+            .map(|p| to_object.transform_point(&(*p).into()).coords)
+            .collect();
+        let eye = to_object.translation.vector;
+        let view = DepthView::new(&local, eye, self.cfg.0.margin, self.cfg.0.view_side);
+        self.frame = self.frame.wrapping_add(1);
+        let (tested, contradicted) = match &view {
+            Some(v) => self.contradict(v),
+            None => (0, 0),
+        };
+        let reset = tested >= self.cfg.0.reset_min_voxels
+            && contradicted as f64 > self.cfg.0.reset_share * tested as f64;
+        if reset {
+            self.memory.clear();
+            self.views.clear();
+        }
+        let voxels_hit = self
+            .memory
+            .insert(&local, self.frame, self.cfg.0.current_weight);
+        if let Some(v) = view {
+            let angle = self.cfg.0.view_angle_deg.to_radians();
+            self.views.keep(v, angle, self.cfg.0.max_views);
+        }
+        Integration {
+            voxels_hit,
+            voxels_tested: tested,
+            voxels_contradicted: contradicted,
+            reset,
+        }
+    }
+
+    fn contradict(&mut self, view: &DepthView) -> (usize, usize) {
+        let frame = self.frame;
+        self.memory
+            .contradict(frame, self.cfg.0.forget_after, |p| match view.evidence(p) {
+                Evidence::SeenThrough => Some(true),
+                Evidence::Surface => Some(false),
+                Evidence::Unknown | Evidence::OutsideSilhouette => None,
+            })
+    }
+
+    /// The fused points (one per voxel), in the object's frame.
+    pub fn points(&self) -> Vec<Vec3> {
+        self.memory.iter().map(|v| v.position()).collect()
+    }
+
+    /// The fused points moved into the sensor's frame by `object_to_sensor`.
+    pub fn points_in(&self, object_to_sensor: &Rigid) -> Vec<Vec3> {
+        self.memory
+            .iter()
+            .map(|v| {
+                object_to_sensor
+                    .transform_point(&v.position().into())
+                    .coords
+            })
+            .collect()
+    }
+
+    /// True when some kept view saw `p` (object frame) empty.
+    pub fn is_free(&self, p: &Vec3) -> bool {
+        self.views.is_free(p)
+    }
+
+    /// The camera positions of the kept views, in the object's frame.
+    pub fn view_eyes(&self) -> Vec<Vec3> {
+        self.views.views().iter().map(DepthView::eye).collect()
+    }
+
+    /// Forget everything (a cold restart of the tracker).
+    pub fn reset(&mut self) {
+        self.memory.clear();
+        self.views.clear();
+    }
+
+    /// Voxels stored.
+    pub fn voxel_count(&self) -> usize {
+        self.memory.len()
+    }
+
+    /// Bytes held now (never more than [`ModelConfig::max_bytes`]).
+    pub fn bytes(&self) -> usize {
+        self.memory.bytes() + self.views.bytes()
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ModelConfig {
+        &self.cfg
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,333 @@
+//! Free-space evidence: what each view of the object saw through.
+//!
+//! A depth camera that sees a surface at range `r` along a ray has seen the
+//! space before it empty. Each kept view is an angular depth image of the
+//! object's points, taken from the camera's position in the **object's**
+//! frame (a gnomonic projection on the plane perpendicular to the view's
+//! mean direction, one bin per pixel cone). A place is *carved* by a view
+//! when it lies in front of what that view saw in its direction, by more
+//! than the margin, or when its direction lies inside the view's field but
+//! outside the object's silhouette (the camera saw past the object there).
+//!
+//! The images are stored as `f32` ranges with a fixed largest side, so each
+//! view costs at most `4·side²` bytes; the set keeps at most `max_views`
+//! views, preferring views from directions it does not yet hold (a view
+//! whose direction is within `min_angle` of a kept one replaces it). This is
+//! the bounded free-space memory of the fused model (issue "the robot's
+//! view": the unseen side is carved by the free space of all views).
+
+use crate::cloud::Vec3;
+use crate::density::Density;
+
+/// Depth-image bin edge, in point spacings δ at the view's mean range.
+pub const BIN_DELTA: f64 = 2.0;
+
+/// One view's angular depth image, in the object's frame.
+#[derive(Debug, Clone)]
+pub struct DepthView {
+    eye: Vec3,
+    dir: Vec3,
+    u: Vec3,
+    w: Vec3,
+    lo: [f64; 2],
+    inv_bin: f64,
+    dims: [usize; 2],
+    /// Nearest range per bin (`INFINITY` where the object was not seen).
+    near: Vec<f32>,
+    /// Thickness of the seen surface (metres).
+    margin: f64,
+}
+
+/// What a view says of one place.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Evidence {
+    /// Outside the view's field, behind the camera, or hidden behind what it saw.
+    Unknown,
+    /// On (within the margin of) the surface the view saw.
+    Surface,
+    /// The camera saw a surface behind this place: it is empty.
+    SeenThrough,
+    /// Inside the field, but the object's silhouette does not cover it.
+    OutsideSilhouette,
+}
+
+impl DepthView {
+    /// The depth image of `points` seen from `eye`, with bins of
+    /// [`BIN_DELTA`] point spacings δ at the mean range (so the silhouette
+    /// has no holes between points) and at most `max_side` bins a side,
+    /// and a seen surface `margin_delta`·δ thick. `None` for a view of
+    /// fewer than 8 points or a degenerate one (a point behind or beside
+    /// the eye).
+    pub fn new(points: &[Vec3], eye: Vec3, margin_delta: f64, max_side: usize) -> Option<Self> {
+        if points.len() < 8 || max_side < 4 {
+            return None;
+        }
+        let delta = Density::new(points, 4).ok()?.median();
+        if !(delta > 0.0 && delta.is_finite()) {
+            return None;
+        }
+        let centroid = points.iter().sum::<Vec3>() / points.len() as f64;
+        let dir = (centroid - eye).try_normalize(1e-12)?;
+        let helper = if dir.x.abs() < 0.9 {
+            Vec3::x()
+        } else {
+            Vec3::y()
+        };
+        let u = dir.cross(&helper).normalize();
+        let w = dir.cross(&u);
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        let mut range_sum = 0.0;
+        for p in points {
+            let d = p - eye;
+            let along = d.dot(&dir);
+            // Also false for a NaN coordinate.
+            if along.is_nan() || along <= 0.2 * d.norm() {
+                return None;
+            }
+            let a = [d.dot(&u) / along, d.dot(&w) / along];
+            for k in 0..2 {
+                lo[k] = lo[k].min(a[k]);
+                hi[k] = hi[k].max(a[k]);
+            }
+            range_sum += along;
+        }
+        let mean_range = range_sum / points.len() as f64;
+        let span = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        let cell = (BIN_DELTA * delta / mean_range).max(span / (max_side - 3) as f64);
+        let dims = [
+            ((hi[0] - lo[0]) / cell).ceil() as usize + 3,
+            ((hi[1] - lo[1]) / cell).ceil() as usize + 3,
+        ];
+        let mut view = Self {
+            eye,
+            dir,
+            u,
+            w,
+            lo: [lo[0] - cell, lo[1] - cell],
+            inv_bin: 1.0 / cell,
+            dims,
+            near: vec![f32::INFINITY; dims[0] * dims[1]],
+            margin: margin_delta * delta,
+        };
+        for p in points {
+            if let Some(c) = view.cell(p) {
+                let r = (p - eye).norm() as f32;
+                view.near[c] = view.near[c].min(r);
+            }
+        }
+        Some(view)
+    }
+
+    /// The camera's position in the object's frame.
+    pub fn eye(&self) -> Vec3 {
+        self.eye
+    }
+
+    /// The view's mean direction (unit).
+    pub fn direction(&self) -> Vec3 {
+        self.dir
+    }
+
+    /// Bytes held by the image.
+    pub fn bytes(&self) -> usize {
+        self.near.len() * std::mem::size_of::<f32>()
+    }
+
+    fn cell(&self, p: &Vec3) -> Option<usize> {
+        let d = p - self.eye;
+        let along = d.dot(&self.dir);
+        if along <= 0.0 {
+            return None;
+        }
+        let x = ((d.dot(&self.u) / along - self.lo[0]) * self.inv_bin).floor();
+        let y = ((d.dot(&self.w) / along - self.lo[1]) * self.inv_bin).floor();
+        if !(x >= 0.0 && y >= 0.0) {
+            return None;
+        }
+        let (x, y) = (x as usize, y as usize);
+        (x < self.dims[0] && y < self.dims[1]).then_some(y * self.dims[0] + x)
+    }
+
+    /// The nearest range seen over the bin of `p` and its 8 neighbours
+    /// (`None` outside the field; `INFINITY` where nothing was seen).
+    fn seen_range(&self, p: &Vec3) -> Option<f64> {
+        let c = self.cell(p)?;
+        let (x, y) = (c % self.dims[0], c / self.dims[0]);
+        let mut best = f32::INFINITY;
+        for yy in y.saturating_sub(1)..=(y + 1).min(self.dims[1] - 1) {
+            for xx in x.saturating_sub(1)..=(x + 1).min(self.dims[0] - 1) {
+                best = best.min(self.near[yy * self.dims[0] + xx]);
+            }
+        }
+        Some(f64::from(best))
+    }
+
+    /// What this view says of `p`.
+    pub fn evidence(&self, p: &Vec3) -> Evidence {
+        let margin = self.margin;
+        let Some(seen) = self.seen_range(p) else {
+            return Evidence::Unknown;
+        };
+        let r = (p - self.eye).norm();
+        if seen.is_infinite() {
+            Evidence::OutsideSilhouette
+        } else if r + margin < seen {
+            Evidence::SeenThrough
+        } else if r <= seen + margin {
+            Evidence::Surface
+        } else {
+            Evidence::Unknown
+        }
+    }
+}
+
+/// The kept views of one object, bounded in number.
+#[derive(Debug, Clone, Default)]
+pub struct ViewSet {
+    views: Vec<DepthView>,
+}
+
+impl ViewSet {
+    /// Keep `view` when its direction is more than `min_angle` (radians)
+    /// from every kept view's (otherwise the kept one covers it); past
+    /// `max_views` the view nearest in direction to another is dropped.
+    /// Returns whether the view was kept.
+    pub fn keep(&mut self, view: DepthView, min_angle: f64, max_views: usize) -> bool {
+        let cos_min = min_angle.cos();
+        if self
+            .views
+            .iter()
+            .any(|v| v.direction().dot(&view.direction()) > cos_min)
+        {
+            return false;
+        }
+        self.views.push(view);
+        while self.views.len() > max_views.max(1) {
+            let i = self.most_redundant();
+            self.views.remove(i);
+        }
+        true
+    }
+
+    /// The index of the view whose direction is closest to another's.
+    fn most_redundant(&self) -> usize {
+        let mut best = (f64::NEG_INFINITY, 0);
+        for (i, a) in self.views.iter().enumerate() {
+            for b in &self.views[i + 1..] {
+                let c = a.direction().dot(&b.direction());
+                if c > best.0 {
+                    best = (c, i);
+                }
+            }
+        }
+        best.1
+    }
+
+    /// True when some kept view saw `p` empty (through it, or beside the
+    /// object's silhouette).
+    pub fn is_free(&self, p: &Vec3) -> bool {
+        self.views.iter().any(|v| {
+            matches!(
+                v.evidence(p),
+                Evidence::SeenThrough | Evidence::OutsideSilhouette
+            )
+        })
+    }
+
+    /// The kept views.
+    pub fn views(&self) -> &[DepthView] {
+        &self.views
+    }
+
+    /// Bytes held by the kept images.
+    pub fn bytes(&self) -> usize {
+        self.views.iter().map(DepthView::bytes).sum()
+    }
+
+    /// Forget every view.
+    pub fn clear(&mut self) {
+        self.views.clear();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The front cap of a unit sphere at the origin seen from `eye`.
+    fn visible_cap(eye: Vec3, n: usize) -> Vec<Vec3> {
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let r = (1.0 - z * z).sqrt();
+                let t = golden * i as f64;
+                Vec3::new(r * t.cos(), r * t.sin(), z)
+            })
+            .filter(|p| (eye - p).dot(p) > 0.0)
+            .collect()
+    }
+
+    #[test]
+    fn a_view_carves_the_space_in_front_and_beside_but_not_behind_the_surface() {
+        let eye = Vec3::new(0.0, 0.0, 5.0);
+        let pts = visible_cap(eye, 20_000);
+        let view = DepthView::new(&pts, eye, 2.0, 256).unwrap();
+        assert_eq!(
+            view.evidence(&Vec3::new(0.0, 0.0, 1.2)),
+            Evidence::SeenThrough
+        );
+        assert_eq!(view.evidence(&Vec3::new(0.0, 0.0, 1.0)), Evidence::Surface);
+        assert_eq!(view.evidence(&Vec3::new(0.0, 0.0, -0.5)), Evidence::Unknown);
+        // Beside the sphere but inside the field (the field spans the
+        // silhouette plus a bin): nothing was seen there.
+        let beside = Vec3::new(0.99, 0.0, 0.6);
+        assert_ne!(view.evidence(&beside), Evidence::Surface);
+        assert_eq!(view.evidence(&Vec3::new(0.0, 0.0, 6.0)), Evidence::Unknown);
+        assert!(view.bytes() <= 4 * 256 * 256);
+    }
+
+    #[test]
+    fn two_opposite_views_carve_what_neither_alone_does() {
+        let front = Vec3::new(0.0, 0.0, 5.0);
+        let back = Vec3::new(0.0, 0.0, -5.0);
+        let mut set = ViewSet::default();
+        set.keep(
+            DepthView::new(&visible_cap(front, 8_000), front, 2.0, 128).unwrap(),
+            0.3,
+            4,
+        );
+        let behind_front_surface = Vec3::new(0.0, 0.0, -1.3);
+        assert!(!set.is_free(&behind_front_surface));
+        set.keep(
+            DepthView::new(&visible_cap(back, 8_000), back, 2.0, 128).unwrap(),
+            0.3,
+            4,
+        );
+        assert!(set.is_free(&behind_front_surface));
+        // The solid's inside stays unknown to both.
+        assert!(!set.is_free(&Vec3::zeros()));
+    }
+
+    #[test]
+    fn the_set_is_bounded_and_keeps_distinct_directions() {
+        let mut set = ViewSet::default();
+        for k in 0..40 {
+            let a = k as f64 * 0.2;
+            let eye = Vec3::new(5.0 * a.cos(), 5.0 * a.sin(), 0.0);
+            set.keep(
+                DepthView::new(&visible_cap(eye, 2_000), eye, 2.0, 64).unwrap(),
+                0.35,
+                6,
+            );
+            assert!(set.views().len() <= 6);
+        }
+        assert_eq!(set.views().len(), 6);
+        for (i, a) in set.views().iter().enumerate() {
+            for b in &set.views()[i + 1..] {
+                assert!(a.direction().dot(&b.direction()) < 0.35f64.cos());
+            }
+        }
+        assert!(set.bytes() <= 6 * 4 * 64 * 64);
+    }
+}
