@@ -29,7 +29,7 @@ use super::{
 };
 use crate::cloud::Vec3;
 use crate::separability::search::{Delta, Searcher};
-use crate::spline::{param_stretch, redistribute, regrid, ClosedSurface};
+use crate::spline::{param_stretch, redistribute, regrid, ClosedSurface, FitSystem};
 use std::time::Instant;
 
 /// Rings over which the ring stretch of `redistribute_stretch` is averaged.
@@ -145,44 +145,16 @@ pub(crate) fn evolve(
         b.last_eta.clear();
         b.last_eta.extend(b.outs.iter().map(|o| o.eta));
         b.last_eta_grid = [m, l];
-        let samples = Samples {
-            outs: &b.outs,
-            un,
-            vn,
-        };
-        let view = prep.view.as_ref();
-        regularize::shifts(
-            cfg,
-            samples,
-            view,
-            warm.is_some(),
-            &mut b.regularize,
-            &mut b.shifts,
-        );
-        b.targets.clear();
-        b.targets.extend(
-            b.outs
-                .iter()
-                .zip(&b.shifts)
-                .map(|(o, &s)| o.p + o.n * (cfg.beta * s)),
-        );
         times.search_ms += ms(t_search);
-        let t_fit = Instant::now();
-        // The orientation sign is fixed once (init, warm start, regrid):
-        // a refit moves the samples by small shifts and cannot turn the
-        // surface inside out.
-        fit.fit(&mut surface, &b.targets)?;
-        // Sample redistribution along the rings (whole objects): equal u
-        // steps become equal arc lengths when the rings have stretched.
-        if cfg.redistribute_stretch > 0.0 && view.is_none() {
-            let stretch = param_stretch(&surface, true, STRETCH_RINGS, 2 * un, &mut b.arc);
-            if stretch > cfg.redistribute_stretch {
-                surface = redistribute(&surface, fit, true, &b.arc)?;
-                // The searched η* belong to the samples before the move.
-                b.last_eta_grid = [0, 0];
-            }
-        }
-        times.fit_ms += ms(t_fit);
+        move_and_refit(
+            prep,
+            cfg,
+            warm.is_some(),
+            &mut surface,
+            fit,
+            &mut b,
+            &mut times,
+        )?;
         let next = schedule.next(eta_g, sparse, [m, l], &b.outs, &b.shifts);
         if let Next::Grow([nm, nl]) = next {
             let t_grow = Instant::now();
@@ -204,6 +176,55 @@ pub(crate) fn evolve(
         t_start,
     };
     finish(prep, &stepper, fits, done, b)
+}
+
+/// Regularise the searched shifts in `b.outs`, move the samples by
+/// `β·shift` along their normals and refit `surface` to them with `fit`;
+/// then, for a whole object whose rings stretched, redistribute its samples
+/// along them (see the module docs).
+fn move_and_refit(
+    prep: &Prepared,
+    cfg: &MembraneConfig,
+    warm: bool,
+    surface: &mut ClosedSurface,
+    fit: &mut FitSystem,
+    b: &mut Buffers,
+    times: &mut PhaseTimes,
+) -> Result<(), MembraneError> {
+    let t_reg = Instant::now();
+    let (un, vn) = (fit.layout().u_n(), fit.layout().v_n());
+    let samples = Samples {
+        outs: &b.outs,
+        un,
+        vn,
+    };
+    let view = prep.view.as_ref();
+    regularize::shifts(cfg, samples, view, warm, &mut b.regularize, &mut b.shifts);
+    b.targets.clear();
+    b.targets.extend(
+        b.outs
+            .iter()
+            .zip(&b.shifts)
+            .map(|(o, &s)| o.p + o.n * (cfg.beta * s)),
+    );
+    times.search_ms += ms(t_reg);
+    let t_fit = Instant::now();
+    // The orientation sign is fixed once (init, warm start, regrid): a
+    // refit moves the samples by small shifts and cannot turn the surface
+    // inside out.
+    fit.fit(surface, &b.targets)?;
+    // Sample redistribution along the rings (whole objects): equal u steps
+    // become equal arc lengths when the rings have stretched.
+    if cfg.redistribute_stretch > 0.0 && view.is_none() {
+        let stretch = param_stretch(surface, true, STRETCH_RINGS, 2 * un, &mut b.arc);
+        if stretch > cfg.redistribute_stretch {
+            *surface = redistribute(surface, fit, true, &b.arc)?;
+            // The searched η* belong to the samples before the move.
+            b.last_eta_grid = [0, 0];
+        }
+    }
+    times.fit_ms += ms(t_fit);
+    Ok(())
 }
 
 /// The end state of an evolution.
