@@ -295,7 +295,7 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), ConfigError> {
     if cfg.beta.is_nan() || cfg.beta <= 0.0 || cfg.beta > 1.0 {
         return bad("beta", "must be in (0, 1]");
     }
-    for (k, v) in [
+    let lengths = [
         ("depth_start", cfg.depth_start),
         ("depth_warm", cfg.depth_warm),
         ("depth_floor_delta", cfg.depth_floor_delta),
@@ -303,12 +303,21 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), ConfigError> {
         ("cross_min_delta", cfg.cross_min_delta),
         ("cross_max", cfg.cross_max),
         ("inward_voxel_delta", cfg.inward_voxel_delta),
-    ] {
-        if !pos(v) {
-            return bad(k, "must be a positive length");
-        }
-    }
+    ];
+    check_each(&lengths, pos, "must be a positive length")?;
     validate_mechanisms(cfg)
+}
+
+/// The first of `keys` whose value fails `ok`, as a [`ConfigError`] saying `problem`.
+fn check_each(
+    keys: &[(&'static str, f64)],
+    ok: impl Fn(f64) -> bool,
+    problem: &str,
+) -> Result<(), ConfigError> {
+    match keys.iter().find(|(_, v)| !ok(*v)) {
+        Some((k, _)) => Err(ConfigError::new(k, problem)),
+        None => Ok(()),
+    }
 }
 
 /// The second half of [`validate`]: the mechanisms' and the schedule's keys.
@@ -338,7 +347,7 @@ fn validate_mechanisms(cfg: &MembraneConfig) -> Result<(), ConfigError> {
     if !(cfg.depth_decay > 0.0 && cfg.depth_decay <= 1.0) {
         return bad("depth_decay", "must be in (0, 1]");
     }
-    for (k, v) in [
+    let non_negative = [
         ("band_inner_delta", cfg.band_inner_delta),
         ("band_outer_delta", cfg.band_outer_delta),
         ("significance", cfg.significance),
@@ -349,11 +358,12 @@ fn validate_mechanisms(cfg: &MembraneConfig) -> Result<(), ConfigError> {
         ("time_limit_ms", cfg.time_limit_ms),
         ("init_quantile", cfg.init_quantile),
         ("spatial_weight", cfg.spatial_weight),
-    ] {
-        if !(v >= 0.0 && v.is_finite()) {
-            return bad(k, "must be a finite value >= 0");
-        }
-    }
+    ];
+    check_each(
+        &non_negative,
+        |v| v >= 0.0 && v.is_finite(),
+        "must be a finite value >= 0",
+    )?;
     if !(cfg.delta_quantile > 0.0 && cfg.delta_quantile <= 1.0) {
         return bad("delta_quantile", "must be in (0, 1]");
     }

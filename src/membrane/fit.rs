@@ -117,7 +117,7 @@ impl<'a> Fits<'a> {
         }
         self.map
             .get_mut(&(m, l))
-            .ok_or_else(|| MembraneError::Internal("fit cache lost a grid"))
+            .ok_or(MembraneError::Internal("fit cache lost a grid"))
     }
 
     /// Sample counts of the `m × l` grid at this reconstruction's `α`.
