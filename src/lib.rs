@@ -22,12 +22,15 @@
 //! | [`metrics`] | Chamfer, F-score and normal consistency (ONet/SAP protocol), surface sampling |
 //! | [`separability`] | point separability (Eq. 7) and the oriented search primitive |
 //! | [`bench`] | `sepmem bench`: the paper's evaluation, reproduced (input conditions, runner, reports) |
+//! | [`spatial`] | nearest-neighbour queries (one kd-tree type shared by the membrane and the metrics) |
 //! | [`shapes`] | procedural closed test shapes (sphere, ellipsoid, rounded box, bottle, bowl, torus, mug) |
 //! | [`model`] | the per-object model fused over frames: voxel point memory and the free space of its views |
 //! | [`membrane`] | the separability membrane: initialisation, evolution, dynamic adjustment, mesh extraction |
 //! | [`spline`] | the closed cubic B-spline surface (Eq. 10), its least-squares fit and growth |
 //! | [`bag`] | rosbag2 bags: MCAP and sqlite3 reading, MCAP writing with ROS 2 schemas |
 //! | [`wire`] | ROS 2 messages, CDR codec, RIHS01 type hashes, PointCloud2 ↔ points |
+//! | [`stream`] | the identity of an object stream (topic and segment label) |
+//! | [`eval`] | scoring replays against ground truth: per-frame scores, cold references, scored replay |
 //! | [`pipeline`] | the frame pipeline: per-stream trackers, warm start with motion compensation, outputs, replay engine |
 //!
 //! Every module's own documentation cites the paper's equations it implements.
@@ -39,6 +42,7 @@ pub mod cloud;
 pub mod config;
 pub mod density;
 pub mod error;
+pub mod eval;
 pub mod io;
 pub mod membrane;
 pub mod mesh;
@@ -49,7 +53,9 @@ pub mod normals;
 pub mod pipeline;
 pub mod separability;
 pub mod shapes;
+pub mod spatial;
 pub mod spline;
+pub mod stream;
 pub mod synth;
 pub mod transport;
 pub mod wire;

@@ -25,10 +25,9 @@
 
 use crate::cloud::{Aabb, Vec3};
 use crate::mesh::TriMesh;
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use crate::spatial::nearest;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -223,19 +222,6 @@ pub fn sample_surface(mesh: &TriMesh, n: usize, seed: u64) -> Result<SurfaceSamp
         out.normals.push(normals[t]);
     }
     Ok(out)
-}
-
-/// For every query point, the distance to and the index of its nearest reference point.
-pub(crate) fn nearest(reference: &[Vec3], queries: &[Vec3]) -> Vec<(f64, usize)> {
-    let coords: Vec<[f64; 3]> = reference.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coords);
-    queries
-        .par_iter()
-        .map(|q| {
-            let nn = tree.nearest_one::<SquaredEuclidean>(&[q.x, q.y, q.z]);
-            (nn.distance.max(0.0).sqrt(), nn.item as usize)
-        })
-        .collect()
 }
 
 /// Compare two sets of oriented samples already in the normalised frame.

@@ -75,9 +75,12 @@ async fn play_and_score(bag_file: &str, node_name: &str, min_f: f64) -> BTreeMap
     .unwrap();
     let mut node_cfg = cfg.node.clone();
     node_cfg.topics = cloud_topics.iter().map(|t| t.to_string()).collect();
-    let node = LoopbackNode::start(&node_cfg, Arc::new(PipelineBackend::from_config(&cfg)))
-        .await
-        .unwrap();
+    let node = LoopbackNode::start(
+        &node_cfg,
+        Arc::new(PipelineBackend::from_config(&cfg).unwrap()),
+    )
+    .await
+    .unwrap();
     let (_ms, meshes) = node.collect("/**", &ty::<SurfaceMesh>()).await.unwrap();
     let (_ks, markers) = node.collect("/**", &ty::<MarkerArray>()).await.unwrap();
     assert!(
@@ -106,14 +109,15 @@ async fn play_and_score(bag_file: &str, node_name: &str, min_f: f64) -> BTreeMap
     }
     tokio::time::sleep(Duration::from_millis(200)).await;
     // Reference: the in-process engine on the same frames.
-    let mut engine = Engine::new(cfg.membrane.clone(), cfg.pipeline.clone(), cfg.wire.clone());
+    let mut engine = Engine::new(&cfg.membrane, cfg.pipeline.clone(), cfg.wire.clone()).unwrap();
     let metrics = MetricsConfig {
         samples: 20_000,
         ..cfg.metrics.clone()
     };
     let mut scores: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     for (k, m) in messages.iter().enumerate() {
-        let (sample, processed) = engine.handle(&m.topic, &m.data).unwrap();
+        let out = engine.handle(&m.topic, &m.data, None).unwrap();
+        let (sample, processed) = (out.sample, out.processed);
         let want = processed.len();
         assert!(want > 0);
         pubs[&m.topic].put(m.data.clone()).await.unwrap();

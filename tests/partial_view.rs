@@ -1,7 +1,7 @@
 //! Partial views: a depth camera sees one side of each object, the normal
 //! case on a robot. Sequences made by `sepmem synth` are replayed through the
 //! pipeline and every frame is scored against the full ground-truth surface
-//! ([`sepmem::pipeline::score`]): precision (nothing invented, against the
+//! ([`sepmem::eval`]): precision (nothing invented, against the
 //! whole surface), recall on the part the camera saw, and the closure of the
 //! unseen side (extent along the viewing ray and enclosed volume relative to
 //! the ground truth's: a membrane collapsed onto the visible shell has a
@@ -10,7 +10,7 @@
 
 use sepmem::bag::Bag;
 use sepmem::config::Config;
-use sepmem::pipeline::score::{replay_scored, ScoredFrame};
+use sepmem::eval::{replay_scored, ScoredFrame};
 use sepmem::synth::sequence::{write_sequence, SequenceSpec};
 use sepmem::synth::Noise;
 

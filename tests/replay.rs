@@ -34,7 +34,7 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
     assert_eq!(messages.len(), 12);
     // No deadline: the test must not depend on the machine's speed.
     let cfg = Config::load(None, &["pipeline.deadline_ms=0".into()]).unwrap();
-    let mut engine = Engine::new(cfg.membrane.clone(), cfg.pipeline.clone(), cfg.wire.clone());
+    let mut engine = Engine::new(&cfg.membrane, cfg.pipeline.clone(), cfg.wire.clone()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let out_path = dir.path().join("out");
     let mut out = BagWriter::create(&out_path).unwrap();
@@ -199,9 +199,9 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
 
 /// The committed `sepmem synth` fixtures replayed with scoring against their
 /// ground-truth side channel.
-fn scored(file: &str, sets: &[&str]) -> Vec<sepmem::pipeline::score::ScoredFrame> {
+fn scored(file: &str, sets: &[&str]) -> Vec<sepmem::eval::ScoredFrame> {
     let bag = Bag::open(&common::data_dir().join("bags").join(file)).unwrap();
-    sepmem::pipeline::score::replay_scored(&bag, &config(sets), 0).unwrap()
+    sepmem::eval::replay_scored(&bag, &config(sets), 0).unwrap()
 }
 
 /// The embedded defaults with `section.key=value` overrides.
@@ -279,7 +279,7 @@ fn warm_frames_track_the_cold_quality_of_the_same_frame() {
     // warm frames run their iteration cap (a quarter of a cold start's).
     let bag = Bag::open(&common::data_dir().join("bags").join("synth_ellipsoid.mcap")).unwrap();
     let dfs = |sets: &[&str]| -> Vec<f64> {
-        let frames = sepmem::pipeline::score::replay_scored(&bag, &config(sets), 1).unwrap();
+        let frames = sepmem::eval::replay_scored(&bag, &config(sets), 1).unwrap();
         frames
             .iter()
             .filter(|f| f.result.path == StartPath::Warm)
@@ -341,7 +341,7 @@ fn every_warm_frame_of_a_20000_point_sequence_reaches_the_cold_f_score_of_its_fr
     sepmem::synth::sequence::write_sequence(&spec, &path, |_| {}).unwrap();
     let bag = Bag::open(&path).unwrap();
     let cfg = config(&["pipeline.deadline_ms=0", "membrane.threads=1"]);
-    let frames = sepmem::pipeline::score::replay_scored(&bag, &cfg, 1).unwrap();
+    let frames = sepmem::eval::replay_scored(&bag, &cfg, 1).unwrap();
     assert_eq!(frames.len(), 20);
     let mut dfs = Vec::new();
     for f in &frames {
@@ -378,7 +378,7 @@ fn cold_references_on_other_thinning_subsets_measure_the_reference_spread() {
     // others are different inputs, so the references spread.
     let bag = Bag::open(&common::data_dir().join("bags").join("synth_ellipsoid.mcap")).unwrap();
     let cfg = config(&["pipeline.deadline_ms=0", "pipeline.max_points=1500"]);
-    let frames = sepmem::pipeline::score::replay_scored(&bag, &cfg, 3).unwrap();
+    let frames = sepmem::eval::replay_scored(&bag, &cfg, 3).unwrap();
     assert_eq!(frames.len(), 12);
     let first = &frames[0];
     assert_eq!(first.result.path, StartPath::Cold);
@@ -440,7 +440,7 @@ fn an_expired_deadline_stops_every_frame_before_its_first_iteration() {
 /// an ample one (60 s) for cold ones, and checks that every later frame was
 /// warm, ran exactly `min_iterations` (pipeline.warm_min_iterations) and was
 /// stopped by the deadline. Returns the frames.
-fn late_warm_frames(min_iterations: usize) -> Vec<sepmem::pipeline::score::ScoredFrame> {
+fn late_warm_frames(min_iterations: usize) -> Vec<sepmem::eval::ScoredFrame> {
     let min = format!("pipeline.warm_min_iterations={min_iterations}");
     let frames = scored(
         "synth_ellipsoid.mcap",
@@ -489,7 +489,7 @@ fn a_late_warm_frame_still_runs_its_minimum_iterations() {
 fn a_drifted_warm_frame_is_redone_cold_and_says_why() {
     // warm_eta_ref_ratio = 1: any warm frame below the last cold frame's η_g
     // is redone cold as "drifted"; 0 (the default) never does that.
-    let count = |frames: &[sepmem::pipeline::score::ScoredFrame]| {
+    let count = |frames: &[sepmem::eval::ScoredFrame]| {
         frames
             .iter()
             .filter(|f| matches!(f.result.reason, PathReason::Drifted { .. }))

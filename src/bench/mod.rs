@@ -25,7 +25,7 @@ pub mod markdown;
 
 use crate::cloud::{Aabb, PointCloud, Vec3};
 use crate::config::{Config, ConfigError};
-use crate::membrane::{self, Budget, MembraneConfig, MembraneError};
+use crate::membrane::{self, Budget, Membrane, MembraneConfig, MembraneError, Start};
 use crate::mesh::TriMesh;
 use crate::metrics::{self, MetricsConfig};
 use crate::shapes::{self, ShapeError};
@@ -42,6 +42,9 @@ pub enum BenchError {
     /// The default configuration could not be loaded.
     #[error("bench: configuration: {0}")]
     Config(#[from] ConfigError),
+    /// The membrane configuration is invalid.
+    #[error("bench: {0}")]
+    Membrane(#[from] membrane::ConfigError),
     /// A procedural shape could not be built.
     #[error("bench: procedural shape: {0}")]
     Shape(#[from] ShapeError),
@@ -382,7 +385,7 @@ pub fn score(pred: &TriMesh, gt: &TriMesh, samples: usize, seed: u64) -> Result<
 /// Run the membrane on `cloud` and score the result against `gt` (if any).
 fn run_one(
     cloud: &PointCloud,
-    cfg: &MembraneConfig,
+    cfg: &Membrane,
     budget: &Budget,
     gt: Option<&TriMesh>,
     samples: usize,
@@ -394,14 +397,14 @@ fn run_one(
 /// [`run_one`], also returning the membrane's report.
 fn run_with_report(
     cloud: &PointCloud,
-    cfg: &MembraneConfig,
+    cfg: &Membrane,
     budget: &Budget,
     gt: Option<&TriMesh>,
     samples: usize,
     seed: u64,
 ) -> (RunResult, Option<membrane::Report>) {
     let t = Instant::now();
-    let rec = membrane::reconstruct(cloud, cfg, budget, None);
+    let rec = cfg.reconstruct(cloud, budget, &Start::Cold);
     let time_ms = t.elapsed().as_secs_f64() * 1e3;
     match rec {
         Ok(rec) => {
@@ -598,6 +601,7 @@ fn table1(
     }
     let n = opts.points();
     let samples = opts.metric_samples();
+    let engine = Membrane::new(opts.membrane.clone())?;
     let mut rows = Vec::new();
     for g in &gts {
         let surface = sample(&g.mesh, n, seed_for(opts.seed, &g.name), &g.name)?;
@@ -606,7 +610,7 @@ fn table1(
             let cloud = PointCloud::from_points(c.apply(&surface, &mut rng_for(opts.seed, &key)));
             let run = run_one(
                 &cloud,
-                &opts.membrane,
+                &engine,
                 &Budget::unlimited(),
                 Some(&g.mesh),
                 samples,
@@ -648,13 +652,14 @@ fn sweep(opts: &BenchOptions, log: &mut dyn FnMut(&str)) -> Result<Vec<SweepRow>
         seed_for(opts.seed, "sweep"),
         "sweep sphere",
     )?;
+    let engine = Membrane::new(opts.membrane.clone())?;
     let mut out = Vec::new();
     for sigma in SWEEP_SIGMAS {
         let key = format!("sweep/{sigma}");
         let pts = clouds::with_perturbed_duplicates(&surface, sigma, &mut rng_for(opts.seed, &key));
         let run = run_one(
             &PointCloud::from_points(pts),
-            &opts.membrane,
+            &engine,
             &Budget::unlimited(),
             Some(&sphere.mesh),
             opts.metric_samples(),
@@ -725,6 +730,7 @@ fn adaptive(opts: &BenchOptions, log: &mut dyn FnMut(&str)) -> Result<Adaptive, 
     let eval_seed = seed_for(opts.seed, "eval/adaptive");
     let mut rows = Vec::new();
     for (mode, cfg) in modes {
+        let cfg = Membrane::new(cfg)?;
         let (run, report) = run_with_report(
             &cloud,
             &cfg,
@@ -740,7 +746,7 @@ fn adaptive(opts: &BenchOptions, log: &mut dyn FnMut(&str)) -> Result<Adaptive, 
         let mut per_iter = Vec::new();
         let mut k = 1;
         while k <= run.iterations {
-            if let Ok(r) = membrane::reconstruct(&cloud, &cfg, &Budget::iterations(k), None) {
+            if let Ok(r) = cfg.reconstruct(&cloud, &Budget::iterations(k), &Start::Cold) {
                 if let Ok(s) = score(&r.mesh, &gt, samples, eval_seed) {
                     per_iter.push((k, s.chamfer_l1));
                 }
@@ -825,7 +831,7 @@ fn ablation(
                 };
                 let run = run_one(
                     &cloud,
-                    &cfg,
+                    &Membrane::new(cfg)?,
                     &Budget::unlimited(),
                     Some(&gt),
                     opts.metric_samples(),
@@ -873,6 +879,16 @@ fn real(opts: &BenchOptions, skipped: &mut Vec<Skip>, log: &mut dyn FnMut(&str))
             rel.ends_with(".pcd").then_some((rel, None))
         }));
     }
+    let engine = match Membrane::new(opts.membrane.clone()) {
+        Ok(e) => e,
+        Err(e) => {
+            skipped.push(Skip {
+                what: "real".into(),
+                reason: format!("invalid membrane configuration: {e}"),
+            });
+            return Vec::new();
+        }
+    };
     for (input, reference) in jobs {
         let cloud = match crate::io::load_cloud(d.join(&input)) {
             Ok(c) => c.cloud,
@@ -901,7 +917,7 @@ fn real(opts: &BenchOptions, skipped: &mut Vec<Skip>, log: &mut dyn FnMut(&str))
         };
         let run = run_one(
             &cloud,
-            &opts.membrane,
+            &engine,
             &Budget::unlimited(),
             gt.as_ref(),
             opts.metric_samples(),
@@ -959,20 +975,20 @@ fn speed(
     let n = opts.points();
     let surface = sample(&gt, n, seed_for(opts.seed, "speed"), name)?;
     let cloud = PointCloud::from_points(surface.clone());
-    let cfg = MembraneConfig {
+    let cfg = Membrane::new(MembraneConfig {
         threads: 1,
         ..opts.membrane.clone()
-    };
+    })?;
     let repeats = if opts.quick { 3 } else { 9 };
     let mut totals = Vec::new();
     let mut reports = Vec::new();
     let mut last = None;
-    // One untimed run first: the process-wide factorisation cache is filled
+    // One untimed run first: the membrane's factorisation cache is filled
     // once per grid size (as in a running node); every timed run is cold
     // (no warm start).
     for r in 0..=repeats {
         let t = Instant::now();
-        match membrane::reconstruct(&cloud, &cfg, &Budget::unlimited(), None) {
+        match cfg.reconstruct(&cloud, &Budget::unlimited(), &Start::Cold) {
             Ok(rec) => {
                 if r > 0 {
                     totals.push(t.elapsed().as_secs_f64() * 1e3);
@@ -1014,11 +1030,10 @@ fn speed(
         let moved = PointCloud::from_points(surface.iter().map(|p| p + off).collect());
         let ws = prev.warm_start();
         let t = Instant::now();
-        match membrane::reconstruct(
+        match cfg.reconstruct(
             &moved,
-            &cfg,
             &Budget::iterations(WARM_MAX_ITERATIONS),
-            Some(&ws),
+            &Start::Warm(ws),
         ) {
             Ok(rec) => {
                 warm_ms.push(t.elapsed().as_secs_f64() * 1e3);

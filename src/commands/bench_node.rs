@@ -135,7 +135,7 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
     for s in 0..args.streams {
         payloads.push(stream_frames(s, args.points, frames_per_stream)?);
     }
-    let backend = Arc::new(PipelineBackend::from_config(&cfg));
+    let backend = Arc::new(PipelineBackend::from_config(&cfg)?);
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

@@ -85,7 +85,7 @@ pub fn run(out: &Path, cfg: &Config, rate: f64) -> Result<()> {
     topics.dedup();
     let mut node_cfg = cfg.node.clone();
     node_cfg.topics = topics;
-    let backend = Arc::new(PipelineBackend::from_config(cfg));
+    let backend = Arc::new(PipelineBackend::from_config(cfg)?);
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

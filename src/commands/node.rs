@@ -64,7 +64,7 @@ pub fn print_summary(s: &NodeSummary) {
 /// `sepmem node`.
 pub fn run_node(config: Option<&Path>, sets: &[String]) -> Result<()> {
     let cfg = Config::load(config, sets)?;
-    let backend = Arc::new(PipelineBackend::from_config(&cfg));
+    let backend = Arc::new(PipelineBackend::from_config(&cfg)?);
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

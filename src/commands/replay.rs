@@ -10,7 +10,7 @@
 //!
 //! When the bag carries ground truth (`sepmem_msgs/msg/GroundTruth`, as
 //! written by `sepmem synth`), every frame of every stream is scored against
-//! the posed ground-truth mesh ([`sepmem::pipeline::score`]): F-score,
+//! the posed ground-truth mesh ([`sepmem::eval`]): F-score,
 //! Chamfer-L1, precision against the full surface, recall on the part the
 //! camera saw, and the closure of the unseen side (extent along the viewing
 //! ray); the summary gives per-stream means and minima.
@@ -30,9 +30,9 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use sepmem::bag::{Bag, BagWriter};
 use sepmem::config::Config;
-use sepmem::pipeline::engine::{decode_sample, Engine};
-use sepmem::pipeline::score::{cold_references, score_frame, FrameScore, ScoreConfig};
-use sepmem::pipeline::{outputs, StartPath};
+use sepmem::eval::{cold_references, score_frame, FrameScore, ScoreConfig};
+use sepmem::pipeline::engine::Engine;
+use sepmem::pipeline::StartPath;
 use sepmem::synth::truth::GroundTruthIndex;
 use sepmem::transport::keys::expand_topic_template;
 use std::collections::BTreeMap;
@@ -117,7 +117,7 @@ pub struct Options {
     /// Reconstruct every frame cold too and compare (needs ground truth for ΔF).
     pub compare_cold: bool,
     /// Cold starts per frame with `compare_cold` (at least 1; see
-    /// [`sepmem::pipeline::score::cold_references`]).
+    /// [`sepmem::eval::cold_references`]).
     pub cold_repeats: usize,
 }
 
@@ -200,7 +200,7 @@ pub fn run_opts(
             BagWriter::create(p).with_context(|| format!("creating output bag {}", p.display()))
         })
         .transpose()?;
-    let mut engine = Engine::new(cfg.membrane.clone(), cfg.pipeline.clone(), cfg.wire.clone());
+    let mut engine = Engine::new(&cfg.membrane, cfg.pipeline.clone(), cfg.wire.clone())?;
     let p = &cfg.pipeline;
     let o = &cfg.node.outputs;
 
@@ -240,7 +240,7 @@ pub fn run_opts(
     let (mut bad_samples, mut failed) = (0usize, 0usize);
     for m in &messages {
         bar.inc(1);
-        let mut sample = match decode_sample(&m.topic, &m.data, &engine.limits, &engine.pipeline) {
+        let frame = match engine.handle(&m.topic, &m.data, None) {
             Ok(x) => x,
             Err(e) => {
                 bad_samples += 1;
@@ -248,11 +248,9 @@ pub fn run_opts(
                 continue;
             }
         };
-        let streams = std::mem::take(&mut sample.streams);
-        let processed: Vec<_> = streams.iter().map(|s| engine.process_ref(s)).collect();
+        let (sample, streams, processed) = (&frame.sample, &frame.sample.streams, &frame.processed);
         let stamp = sample.header.stamp.to_nanos();
-        let mut ok = Vec::new();
-        for (sc, pr) in streams.iter().zip(&processed) {
+        for (sc, pr) in streams.iter().zip(processed) {
             match &pr.outcome {
                 Ok(r) => {
                     latencies.push(r.latency_ms);
@@ -299,8 +297,13 @@ pub fn run_opts(
                         line += &format!(" {:>6} {:>6} {:>6} {:>7} {:>5}", "-", "-", "-", "-", "-");
                     }
                     if opts.compare_cold {
-                        let refs = cold_references(&sc.cloud, cfg, opts.cold_repeats.max(1))
-                            .with_context(|| format!("cold reference of {id} frame {}", r.frame))?;
+                        let refs = cold_references(
+                            &sc.cloud,
+                            &engine.membranes.cold,
+                            &cfg.pipeline,
+                            opts.cold_repeats.max(1),
+                        )
+                        .with_context(|| format!("cold reference of {id} frame {}", r.frame))?;
                         let mut f_refs = Vec::with_capacity(refs.len());
                         for c in &refs {
                             f_refs.push(match &gt {
@@ -345,7 +348,6 @@ pub fn run_opts(
                         );
                         sepmem::io::save_mesh(dir.join(name), &r.reconstruction.mesh)?;
                     }
-                    ok.push(r);
                 }
                 Err(e) => {
                     failed += 1;
@@ -354,27 +356,19 @@ pub fn run_opts(
             }
         }
         if let Some(w) = writer.as_mut() {
-            for r in &ok {
-                w.write(
-                    &expand_topic_template(&o.mesh, &m.topic),
-                    m.log_time,
-                    &outputs::surface_mesh(r, &sample.header),
-                )?;
+            let msgs = frame.messages(&p.marker_namespace);
+            for (mesh, diag) in &msgs.objects {
+                w.write(&expand_topic_template(&o.mesh, &m.topic), m.log_time, mesh)?;
                 w.write(
                     &expand_topic_template(&o.frame_diagnostics, &m.topic),
                     m.log_time,
-                    &outputs::frame_diagnostics(
-                        r,
-                        &sample.header,
-                        sample.points_in,
-                        sample.dropped,
-                    ),
+                    diag,
                 )?;
             }
             w.write(
                 &expand_topic_template(&o.markers, &m.topic),
                 m.log_time,
-                &outputs::marker_array(&ok, &sample.header, &p.marker_namespace),
+                &msgs.markers,
             )?;
         }
     }

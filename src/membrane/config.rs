@@ -7,6 +7,7 @@
 //! point spacing δ) or `_m` (metres).
 
 use serde::{Deserialize, Serialize};
+use thiserror::Error;
 
 /// Which axis the two poles of the membrane lie on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -235,4 +236,148 @@ impl Default for MembraneConfig {
             view_completion: false,
         }
     }
+}
+
+/// A membrane parameter out of range: the key and what is wrong with it.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("membrane config: `{key}` {problem}")]
+pub struct ConfigError {
+    /// Parameter name.
+    pub key: &'static str,
+    /// What is wrong with it.
+    pub problem: String,
+}
+
+impl ConfigError {
+    /// `key` is wrong because of `problem`.
+    pub fn new(key: &'static str, problem: impl Into<String>) -> Self {
+        Self {
+            key,
+            problem: problem.into(),
+        }
+    }
+}
+
+/// Check every parameter's range.
+///
+/// # Errors
+/// [`ConfigError`] naming the first bad key.
+pub fn validate(cfg: &MembraneConfig) -> Result<(), ConfigError> {
+    let bad = |key: &'static str, problem: &str| Err(ConfigError::new(key, problem));
+    let pos = |x: f64| x > 0.0 && x.is_finite();
+    if cfg.knn_k == 0 {
+        return bad("knn_k", "must be at least 1");
+    }
+    if cfg.outlier_factor.is_nan() || cfg.outlier_factor < 0.0 {
+        return bad("outlier_factor", "must be >= 0");
+    }
+    if cfg.grid_start[0] < 4 || cfg.grid_start[1] < 4 {
+        return bad("grid_start", "needs M >= 4 and L >= 4");
+    }
+    if cfg.grid_max[0] < cfg.grid_start[0] || cfg.grid_max[1] < cfg.grid_start[1] {
+        return bad("grid_max", "must be at least grid_start");
+    }
+    if cfg.adaptive && cfg.grid_step[0] == 0 && cfg.grid_step[1] == 0 {
+        return bad("grid_step", "must add at least one column or row");
+    }
+    if cfg.div_min < 4 {
+        return bad("div_min", "must be at least 4");
+    }
+    if !pos(cfg.alpha) {
+        return bad("alpha", "must be positive");
+    }
+    if !pos(cfg.alpha_warm) {
+        return bad("alpha_warm", "must be positive");
+    }
+    if cfg.boundaries == 0 {
+        return bad("boundaries", "must be at least 1");
+    }
+    if cfg.beta.is_nan() || cfg.beta <= 0.0 || cfg.beta > 1.0 {
+        return bad("beta", "must be in (0, 1]");
+    }
+    let lengths = [
+        ("depth_start", cfg.depth_start),
+        ("depth_warm", cfg.depth_warm),
+        ("depth_floor_delta", cfg.depth_floor_delta),
+        ("cross_scale", cfg.cross_scale),
+        ("cross_min_delta", cfg.cross_min_delta),
+        ("cross_max", cfg.cross_max),
+        ("inward_voxel_delta", cfg.inward_voxel_delta),
+    ];
+    check_each(&lengths, pos, "must be a positive length")?;
+    validate_mechanisms(cfg)
+}
+
+/// The first of `keys` whose value fails `ok`, as a [`ConfigError`] saying `problem`.
+fn check_each(
+    keys: &[(&'static str, f64)],
+    ok: impl Fn(f64) -> bool,
+    problem: &str,
+) -> Result<(), ConfigError> {
+    match keys.iter().find(|(_, v)| !ok(*v)) {
+        Some((k, _)) => Err(ConfigError::new(k, problem)),
+        None => Ok(()),
+    }
+}
+
+/// The second half of [`validate`]: the mechanisms' and the schedule's keys.
+fn validate_mechanisms(cfg: &MembraneConfig) -> Result<(), ConfigError> {
+    let bad = |key: &'static str, problem: &str| Err(ConfigError::new(key, problem));
+    let pos = |x: f64| x > 0.0 && x.is_finite();
+    if !(cfg.pole_tension >= 0.0 && cfg.pole_tension <= 1.0) {
+        return bad("pole_tension", "must be in [0, 1]");
+    }
+    if !(1..=3).contains(&cfg.pole_axis_candidates) {
+        return bad("pole_axis_candidates", "must be 1, 2 or 3");
+    }
+    if !(cfg.pole_axis_support >= 0.0 && cfg.pole_axis_support <= 1.0) {
+        return bad("pole_axis_support", "must be in [0, 1]");
+    }
+    if !(cfg.redistribute_stretch == 0.0
+        || (cfg.redistribute_stretch > 1.0 && cfg.redistribute_stretch.is_finite()))
+    {
+        return bad("redistribute_stretch", "must be 0 (off) or above 1");
+    }
+    if !(cfg.warm_back_smoothing >= 0.0 && cfg.warm_back_smoothing <= 1.0) {
+        return bad("warm_back_smoothing", "must be in [0, 1]");
+    }
+    if !(cfg.inner_margin >= 0.0 && cfg.inner_margin < 0.5) {
+        return bad("inner_margin", "must be in [0, 0.5)");
+    }
+    if !(cfg.depth_decay > 0.0 && cfg.depth_decay <= 1.0) {
+        return bad("depth_decay", "must be in (0, 1]");
+    }
+    let non_negative = [
+        ("band_inner_delta", cfg.band_inner_delta),
+        ("band_outer_delta", cfg.band_outer_delta),
+        ("significance", cfg.significance),
+        ("inward_step", cfg.inward_step),
+        ("roughness", cfg.roughness),
+        ("g_min", cfg.g_min),
+        ("plateau_eps", cfg.plateau_eps),
+        ("time_limit_ms", cfg.time_limit_ms),
+        ("init_quantile", cfg.init_quantile),
+        ("spatial_weight", cfg.spatial_weight),
+    ];
+    check_each(
+        &non_negative,
+        |v| v >= 0.0 && v.is_finite(),
+        "must be a finite value >= 0",
+    )?;
+    if !(cfg.delta_quantile > 0.0 && cfg.delta_quantile <= 1.0) {
+        return bad("delta_quantile", "must be in (0, 1]");
+    }
+    if !pos(cfg.delta_scale) {
+        return bad("delta_scale", "must be positive");
+    }
+    if cfg.init_quantile >= 0.5 {
+        return bad("init_quantile", "must be below 0.5");
+    }
+    if !(cfg.init_margin >= 1.0 && cfg.init_margin.is_finite()) {
+        return bad("init_margin", "must be >= 1");
+    }
+    if cfg.max_iterations == 0 {
+        return bad("max_iterations", "must be at least 1");
+    }
+    Ok(())
 }

@@ -11,7 +11,9 @@
 //! every point (times a margin) and the control net is fitted by least
 //! squares to samples of this solid.
 
-use super::config::PoleAxis;
+use super::config::{MembraneConfig, PoleAxis};
+use super::fit::Fits;
+use super::{MembraneError, WarmStart};
 use crate::cloud::Vec3;
 use crate::spline::{ClosedSurface, FitSystem, SplineError};
 
@@ -115,6 +117,37 @@ pub fn octagon(
     fit.fit(&mut surf, &targets)?;
     surf.fix_orientation();
     Ok(surf)
+}
+
+/// The initial surface of an evolution and the coordinate axis of its
+/// poles: a warm start's surface (its poles' axis read from the surface, no
+/// pass over the points on the per-frame path), or the octagon around
+/// `points` on the first grid, its poles on `pole` (0 = x, 1 = y, 2 = z;
+/// `None`: the configured `pole_axis`).
+pub(crate) fn initial(
+    points: &[Vec3],
+    cfg: &MembraneConfig,
+    warm: Option<&WarmStart>,
+    pole: Option<usize>,
+    fits: &mut Fits<'_>,
+) -> Result<(ClosedSurface, usize), MembraneError> {
+    if let Some(w) = warm {
+        let mut s = w.surface.clone();
+        s.fix_orientation();
+        let [a, b] = s.poles();
+        let axis = (b - a).abs().imax();
+        return Ok((s, axis));
+    }
+    let pole_axis = pole.unwrap_or_else(|| pole_axis_of(points, cfg.pole_axis, cfg.init_quantile));
+    let [m, l] = cfg.grid_start;
+    let surface = octagon(
+        points,
+        [PoleAxis::X, PoleAxis::Y, PoleAxis::Z][pole_axis],
+        cfg.init_quantile,
+        cfg.init_margin,
+        fits.get(m, l)?,
+    )?;
+    Ok((surface, pole_axis))
 }
 
 #[cfg(test)]

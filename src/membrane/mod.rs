@@ -2,54 +2,56 @@
 //! watertight mesh of one object from its raw points.
 //!
 //! A closed cubic B-spline surface (paper Eq. 10, [`crate::spline`]) starts
-//! around the object (the "3D octagon" of §III-E, [`init`]) and evolves:
+//! around the object (the "3D octagon" of §III-E, [`init`]) and evolves
+//! ([`evolve`], one module per step):
 //!
-//! 1. sample the surface at `u_n × v_n` with `div_n = max(div_min, α(q−1)+1)` (Eq. 14);
+//! 1. sample the surface at `u_n × v_n` with `div_n = max(div_min, α(q−1)+1)`
+//!    (Eq. 14, [`fit::sample_counts`]);
 //! 2. at each sample, slide the boundary of a cuboid search region along the
 //!    outward normal and take the position of maximum point separability η*
 //!    (Eq. 7, or the weighted Eq. 9) — the external energy `E_sep = −η*`
-//!    (Eqs. 11–12);
-//! 3. move the sample by `β` times its (robustly centred) shift;
-//! 4. refit the control net by least squares;
-//! 5. track the global separability `η_g` (mean of the per-sample η*) and stop
-//!    on a plateau, at the iteration cap, or when the caller's [`Budget`] runs out.
+//!    (Eqs. 11–12) — and turn it into a shift ([`step`]);
+//! 3. regularise the shifts ([`regularize`]) and move each sample by `β`
+//!    times its shift;
+//! 4. refit the control net by least squares ([`fit`]);
+//! 5. track the global separability `η_g` (mean of the per-sample η*); grow
+//!    the control grid when it stops gaining (dynamic membrane adjustment,
+//!    §III-F), and stop on a plateau, at the iteration cap, or when the
+//!    caller's [`Budget`] runs out ([`schedule`]).
 //!
-//! Dynamic membrane adjustment (§III-F) grows the control grid (8×5 → 40×25 by
-//! default) whenever `Δη_g < g_min`. On top of the paper's recipe this
-//! implementation adds the mechanisms that decided the outcome in the
-//! prototype (see `notes/prototype-findings.md`): a k-NN outlier filter, δ as
-//! a robust k-NN distance (the median of d_i, Eq. 5, for a single view;
-//! 1.3 × their lower quartile for a whole object), the
-//! "inner side denser" rule, a dense-side
-//! significance test, a robust median shift, a 3×3 median filter of shifts,
-//! a roughness-penalised fit, a shrinking search depth with a δ floor, and an
-//! inward force gated by an occupancy inside/outside grid ([`occupancy`]).
+//! Before the loop, [`prepare`] thins the points, filters outliers and
+//! measures the spacing δ (Eq. 5); a cold whole object may be evolved along
+//! several pole axes ([`pole`]); [`extract`] turns the final surface into a
+//! mesh. On top of the paper's recipe this implementation adds the
+//! mechanisms that decided the outcome in the prototype (see
+//! `notes/prototype-findings.md`); each module's doc names the measurement
+//! behind its mechanisms.
 //!
-//! The membrane is a sphere topologically, and where its poles sit decides
-//! how it meets a tunnel or a deep cavity: with the poles in a torus's hole
-//! the two hole caps stall apart, while from the side the ring is wrapped
-//! closely. A cold whole object whose membrane leaves data-free parts (less
-//! than `pole_axis_support` of its mesh vertices near a point) is therefore
-//! reconstructed along up to `pole_axis_candidates` pole axes (the
-//! configured one, then the most different bounding-box edge), and the
-//! result with the highest final `η_g` × point coverage is kept
-//! ([`reconstruct`]).
+//! [`Membrane`] is the engine: built once from a validated configuration, it
+//! owns the fit cache and is shared by every reconstruction.
 
 pub mod config;
 pub mod evolve;
 pub mod extract;
+pub mod fit;
 pub mod init;
 pub mod occupancy;
+pub mod pole;
+pub mod prepare;
+pub mod regularize;
+pub mod schedule;
+pub mod step;
 pub mod view;
 
-pub use config::{AttributeWeight, MembraneConfig, PoleAxis};
+pub use config::{AttributeWeight, ConfigError, MembraneConfig, PoleAxis};
 pub use extract::{extract_mesh, SEPARABILITY_CHANNEL};
 
-use crate::cloud::{CloudError, PointCloud, Vec3};
+use crate::cloud::{CloudError, PointCloud};
 use crate::mesh::TriMesh;
-use crate::metrics::nearest;
 use crate::spline::{ClosedSurface, SplineError};
+use fit::FitCache;
 use serde::Serialize;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
@@ -72,19 +74,14 @@ pub enum MembraneError {
     #[error("membrane surface: {0}")]
     Spline(#[from] SplineError),
     /// A configuration value is out of range.
-    #[error("membrane config: `{key}` {problem}")]
-    Config {
-        /// Parameter name.
-        key: &'static str,
-        /// What is wrong with it.
-        problem: String,
-    },
+    #[error(transparent)]
+    Config(#[from] ConfigError),
     /// An attribute named in the config is not carried by the cloud.
     #[error("membrane: attribute `{0}` named in membrane.attributes is not in the input cloud")]
     MissingAttribute(String),
-    /// The worker thread pool could not be created.
-    #[error("membrane: cannot create a thread pool: {0}")]
-    ThreadPool(String),
+    /// An internal invariant did not hold (a bug, reported instead of a panic).
+    #[error("membrane internal error: {0}")]
+    Internal(&'static str),
 }
 
 /// What the caller allows one reconstruction to spend.
@@ -255,146 +252,134 @@ impl Reconstruction {
     }
 }
 
-/// Reconstruct a watertight mesh of the object whose points are `cloud`.
+/// How a reconstruction starts.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum Start {
+    /// From the octagon around the points (paper §III-E), along up to
+    /// `pole_axis_candidates` pole axes ([`pole`]).
+    #[default]
+    Cold,
+    /// From a previous surface (the node's frame-to-frame warm start).
+    Warm(WarmStart),
+}
+
+impl Start {
+    /// The warm start, if any.
+    pub fn warm(&self) -> Option<&WarmStart> {
+        match self {
+            Self::Cold => None,
+            Self::Warm(w) => Some(w),
+        }
+    }
+}
+
+/// The reconstruction engine: a validated configuration with the cache of
+/// factored fit systems ([`fit::FitCache`]) and the worker pool, built once
+/// and used for every reconstruction (clones share the cache and the pool).
+#[derive(Debug, Clone)]
+pub struct Membrane {
+    cfg: Arc<MembraneConfig>,
+    fits: Arc<FitCache>,
+    /// `threads` workers, or `None` for rayon's global pool (`threads = 0`).
+    pool: Option<Arc<rayon::ThreadPool>>,
+}
+
+impl Membrane {
+    /// Validate `cfg` and build the engine.
+    ///
+    /// # Errors
+    /// [`ConfigError`] naming the first bad key (or `threads` when the
+    /// worker pool cannot be created).
+    pub fn new(cfg: MembraneConfig) -> Result<Self, ConfigError> {
+        Self::with_cache(cfg, Arc::new(FitCache::default()), None)
+    }
+
+    fn with_cache(
+        cfg: MembraneConfig,
+        fits: Arc<FitCache>,
+        pool: Option<Arc<rayon::ThreadPool>>,
+    ) -> Result<Self, ConfigError> {
+        config::validate(&cfg)?;
+        let pool = match (cfg.threads, pool) {
+            (0, _) => None,
+            (n, Some(p)) if p.current_num_threads() == n => Some(p),
+            (n, _) => Some(Arc::new(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .build()
+                    .map_err(|e| ConfigError::new("threads", format!("no thread pool: {e}")))?,
+            )),
+        };
+        Ok(Self {
+            cfg: Arc::new(cfg),
+            fits,
+            pool,
+        })
+    }
+
+    /// Another engine whose configuration is this one's changed by `edit`,
+    /// sharing the fit cache and the pool (built once, e.g. the pipeline's
+    /// warm-frame variant).
+    ///
+    /// # Errors
+    /// [`ConfigError`] when the edited configuration is invalid.
+    pub fn variant(&self, edit: impl FnOnce(&mut MembraneConfig)) -> Result<Self, ConfigError> {
+        let mut cfg = (*self.cfg).clone();
+        edit(&mut cfg);
+        Self::with_cache(cfg, Arc::clone(&self.fits), self.pool.clone())
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &MembraneConfig {
+        &self.cfg
+    }
+
+    /// Reconstruct a watertight mesh of the object whose points are `cloud`,
+    /// within `budget`, from `start`.
+    ///
+    /// # Errors
+    /// [`MembraneError`] for an unusable cloud (empty, too few points,
+    /// flat) or a missing attribute in weighted mode.
+    pub fn reconstruct(
+        &self,
+        cloud: &PointCloud,
+        budget: &Budget,
+        start: &Start,
+    ) -> Result<Reconstruction, MembraneError> {
+        let run = || pole::reconstruct(cloud, &self.cfg, &self.fits, budget, start.warm());
+        match &self.pool {
+            None => run(),
+            Some(pool) => pool.install(run),
+        }
+    }
+
+    /// Factor the fit system that a warm start from an `m × l` surface will
+    /// use (sampled with `alpha_warm`), so that the first warm frame after a
+    /// cold one does not pay for it. The frame pipeline calls this at the
+    /// end of a cold frame, whose budget is the longer one.
+    ///
+    /// # Errors
+    /// [`MembraneError`] when the grid is invalid or the system is singular.
+    pub fn prefactor_warm(&self, m: usize, l: usize) -> Result<(), MembraneError> {
+        let alpha = self.cfg.alpha_warm;
+        if !self.fits.contains(&self.cfg, alpha, m, l) {
+            self.fits.get(&self.cfg, alpha, m, l)?;
+        }
+        Ok(())
+    }
+}
+
+/// Reconstruct once with `cfg` (a one-off [`Membrane`]: repeated
+/// reconstructions should build the engine once and share its fit cache).
 ///
 /// # Errors
-/// [`MembraneError`] for an unusable cloud (empty, too few points, flat), an
-/// invalid configuration, or a missing attribute in weighted mode.
+/// [`MembraneError`] for an invalid configuration or an unusable cloud.
 pub fn reconstruct(
     cloud: &PointCloud,
     cfg: &MembraneConfig,
     budget: &Budget,
     warm: Option<&WarmStart>,
 ) -> Result<Reconstruction, MembraneError> {
-    evolve::validate(cfg)?;
-    if cfg.threads == 0 {
-        return select_pole_axis(cloud, cfg, budget, warm);
-    }
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(cfg.threads)
-        .build()
-        .map_err(|e| MembraneError::ThreadPool(e.to_string()))?;
-    pool.install(|| select_pole_axis(cloud, cfg, budget, warm))
-}
-
-/// The evolution along the configured pole axis and, for a cold whole
-/// object with an automatic axis (`shortest`/`longest`) whose first
-/// reconstruction has a [`support`] below `pole_axis_support`, along up to
-/// `pole_axis_candidates − 1` other axes, the most different bounding-box
-/// edge first. The reconstruction with the highest [`selection_score`] is
-/// kept.
-fn select_pole_axis(
-    cloud: &PointCloud,
-    cfg: &MembraneConfig,
-    budget: &Budget,
-    warm: Option<&WarmStart>,
-) -> Result<Reconstruction, MembraneError> {
-    let t0 = Instant::now();
-    let prep = evolve::prepare(cloud, cfg)?;
-    let first = evolve::evolve(&prep, cfg, budget, warm, None)?;
-    let within_budget = |r: &Reconstruction| {
-        matches!(
-            r.report.stop,
-            StopReason::Converged | StopReason::MaxIterations
-        )
-    };
-    let farthest_first = match cfg.pole_axis {
-        PoleAxis::Shortest => true,
-        PoleAxis::Longest => false,
-        PoleAxis::X | PoleAxis::Y | PoleAxis::Z => return Ok(first),
-    };
-    if cfg.pole_axis_candidates <= 1
-        || warm.is_some()
-        || prep.is_single_view()
-        || !within_budget(&first)
-    {
-        return Ok(first);
-    }
-    // A membrane lying on the data everywhere has nothing to gain from
-    // another axis; one spanning a hole or a cavity opening has.
-    if support(&first, &prep.points) >= cfg.pole_axis_support {
-        return Ok(first);
-    }
-    let (lo, hi) = init::quantile_bounds(&prep.points, cfg.init_quantile);
-    let extent = hi - lo;
-    let mut others: Vec<usize> = (0..3).filter(|&a| a != first.report.pole_axis).collect();
-    others.sort_by(|&a, &b| extent[a].total_cmp(&extent[b]));
-    if farthest_first {
-        others.reverse();
-    }
-    others.truncate(cfg.pole_axis_candidates - 1);
-    let mut best_score = selection_score(&first, &prep.points);
-    let mut best = first;
-    let mut tried = 1;
-    let mut discarded_ms = 0.0;
-    for axis in others {
-        let t = Instant::now();
-        tried += 1;
-        // A failure along another axis keeps what we have; so does a run
-        // cut short by the deadline (its score is not comparable).
-        match evolve::evolve(&prep, cfg, budget, None, Some(axis)) {
-            Ok(rec) if within_budget(&rec) => {
-                let score = selection_score(&rec, &prep.points);
-                if score > best_score {
-                    discarded_ms += best.report.times.total_ms - prep.prepare_ms;
-                    best_score = score;
-                    best = rec;
-                } else {
-                    discarded_ms += t.elapsed().as_secs_f64() * 1e3;
-                }
-            }
-            _ => discarded_ms += t.elapsed().as_secs_f64() * 1e3,
-        }
-    }
-    best.report.pole_axes_tried = tried;
-    best.report.times.other_axes_ms = discarded_ms;
-    best.report.times.total_ms = t0.elapsed().as_secs_f64() * 1e3;
-    Ok(best)
-}
-
-/// Mean edge length of a mesh: the tolerance of [`support`] and
-/// [`selection_score`].
-fn mean_edge(mesh: &TriMesh) -> f64 {
-    let v = &mesh.vertices;
-    mesh.triangles
-        .iter()
-        .map(|t| (v[t[0] as usize] - v[t[1] as usize]).norm())
-        .sum::<f64>()
-        / mesh.triangles.len().max(1) as f64
-}
-
-/// Share of the mesh's vertices within one mean mesh edge of a used point:
-/// below 1 where the membrane spans space without data, such as a torus's
-/// hole or a cup's opening.
-fn support(rec: &Reconstruction, points: &[Vec3]) -> f64 {
-    let v = &rec.mesh.vertices;
-    if v.is_empty() || points.is_empty() {
-        return 0.0;
-    }
-    let tol = mean_edge(&rec.mesh);
-    let near = nearest(points, v).iter().filter(|(d, _)| *d <= tol).count();
-    near as f64 / v.len() as f64
-}
-
-/// Points at most this many of whose are checked by [`selection_score`].
-const COVERAGE_QUERIES: usize = 5000;
-
-/// Score of a reconstruction for the pole-axis selection: its final η_g
-/// times its *coverage*, the share of the used points (after the outlier
-/// filter; at most [`COVERAGE_QUERIES`], evenly strided) within one mean
-/// mesh edge of a mesh vertex. η_g alone rewards a membrane that lies well on the parts it
-/// reaches, even when it slipped inside a thin tube and left the rest of the
-/// surface uncovered; coverage alone ignores how well it separates.
-fn selection_score(rec: &Reconstruction, points: &[Vec3]) -> f64 {
-    if rec.mesh.vertices.is_empty() || points.is_empty() || rec.mesh.triangles.is_empty() {
-        return 0.0;
-    }
-    let tol = mean_edge(&rec.mesh);
-    let step = points.len().div_ceil(COVERAGE_QUERIES).max(1);
-    let queries: Vec<Vec3> = points.iter().step_by(step).copied().collect();
-    let hit = nearest(&rec.mesh.vertices, &queries)
-        .iter()
-        .filter(|(d, _)| *d <= tol)
-        .count();
-    rec.report.eta_final * hit as f64 / queries.len() as f64
+    let start = warm.map_or(Start::Cold, |w| Start::Warm(w.clone()));
+    Membrane::new(cfg.clone())?.reconstruct(cloud, budget, &start)
 }

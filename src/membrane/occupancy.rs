@@ -66,91 +66,12 @@ impl OutsideGrid {
                 count[id(x, y, z)] += 1;
             }
         }
-        // 3×3×3 box sum, separable along x, y, z.
-        let mut a = count;
-        let mut b = vec![0u32; cells];
-        for axis in 0..3 {
-            for z in 0..nz {
-                for y in 0..ny {
-                    for x in 0..nx {
-                        let c = [x, y, z];
-                        let mut s = 0;
-                        for d in [-1i64, 0, 1] {
-                            let k = c[axis] as i64 + d;
-                            if k < 0 || k >= dims[axis] as i64 {
-                                continue;
-                            }
-                            let mut cc = c;
-                            cc[axis] = k as usize;
-                            s += a[id(cc[0], cc[1], cc[2])];
-                        }
-                        b[id(x, y, z)] = s;
-                    }
-                }
-            }
-            std::mem::swap(&mut a, &mut b);
-        }
-        let occupied: Vec<bool> = a.iter().map(|&c| c as usize >= min_points).collect();
-        // Dilate once (6-neighbourhood).
-        let mut solid = occupied.clone();
-        for z in 0..nz {
-            for y in 0..ny {
-                for x in 0..nx {
-                    if occupied[id(x, y, z)] {
-                        continue;
-                    }
-                    let near = (x > 0 && occupied[id(x - 1, y, z)])
-                        || (x + 1 < nx && occupied[id(x + 1, y, z)])
-                        || (y > 0 && occupied[id(x, y - 1, z)])
-                        || (y + 1 < ny && occupied[id(x, y + 1, z)])
-                        || (z > 0 && occupied[id(x, y, z - 1)])
-                        || (z + 1 < nz && occupied[id(x, y, z + 1)]);
-                    solid[id(x, y, z)] = near;
-                }
-            }
-        }
-        // Flood fill the empty space from the border.
-        let mut outside = vec![false; cells];
-        let mut stack: Vec<(usize, usize, usize)> = Vec::new();
-        for z in 0..nz {
-            for y in 0..ny {
-                for x in 0..nx {
-                    let border =
-                        x == 0 || y == 0 || z == 0 || x + 1 == nx || y + 1 == ny || z + 1 == nz;
-                    if border && !solid[id(x, y, z)] && !outside[id(x, y, z)] {
-                        outside[id(x, y, z)] = true;
-                        stack.push((x, y, z));
-                    }
-                }
-            }
-        }
-        while let Some((x, y, z)) = stack.pop() {
-            let mut visit = |x: usize, y: usize, z: usize| {
-                let c = id(x, y, z);
-                if !solid[c] && !outside[c] {
-                    outside[c] = true;
-                    stack.push((x, y, z));
-                }
-            };
-            if x > 0 {
-                visit(x - 1, y, z);
-            }
-            if x + 1 < nx {
-                visit(x + 1, y, z);
-            }
-            if y > 0 {
-                visit(x, y - 1, z);
-            }
-            if y + 1 < ny {
-                visit(x, y + 1, z);
-            }
-            if z > 0 {
-                visit(x, y, z - 1);
-            }
-            if z + 1 < nz {
-                visit(x, y, z + 1);
-            }
-        }
+        let occupied: Vec<bool> = box_sum(count, dims)
+            .iter()
+            .map(|&c| c as usize >= min_points)
+            .collect();
+        let solid = dilate(&occupied, dims);
+        let outside = flood_outside(&solid, dims);
         Some(Self {
             origin,
             inv_voxel,
@@ -219,6 +140,117 @@ impl OutsideGrid {
     pub fn outside_fraction(&self) -> f64 {
         self.outside.iter().filter(|&&o| o).count() as f64 / self.outside.len().max(1) as f64
     }
+}
+
+/// Row-major cell index in a grid of `dims`.
+fn cell(dims: [usize; 3], x: usize, y: usize, z: usize) -> usize {
+    (z * dims[1] + y) * dims[0] + x
+}
+
+/// The 3×3×3 box sum of `count` over a grid of `dims`, separable along x, y, z.
+fn box_sum(count: Vec<u32>, dims: [usize; 3]) -> Vec<u32> {
+    let [nx, ny, nz] = dims;
+    let id = |x: usize, y: usize, z: usize| cell(dims, x, y, z);
+    // 3×3×3 box sum, separable along x, y, z.
+    let mut a = count;
+    let mut b = vec![0u32; a.len()];
+    for axis in 0..3 {
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    let c = [x, y, z];
+                    let mut s = 0;
+                    for d in [-1i64, 0, 1] {
+                        let k = c[axis] as i64 + d;
+                        if k < 0 || k >= dims[axis] as i64 {
+                            continue;
+                        }
+                        let mut cc = c;
+                        cc[axis] = k as usize;
+                        s += a[id(cc[0], cc[1], cc[2])];
+                    }
+                    b[id(x, y, z)] = s;
+                }
+            }
+        }
+        std::mem::swap(&mut a, &mut b);
+    }
+    a
+}
+
+/// `occupied` dilated once (6-neighbourhood).
+fn dilate(occupied: &[bool], dims: [usize; 3]) -> Vec<bool> {
+    let [nx, ny, nz] = dims;
+    let id = |x: usize, y: usize, z: usize| cell(dims, x, y, z);
+    // Dilate once (6-neighbourhood).
+    let mut solid = occupied.to_vec();
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                if occupied[id(x, y, z)] {
+                    continue;
+                }
+                let near = (x > 0 && occupied[id(x - 1, y, z)])
+                    || (x + 1 < nx && occupied[id(x + 1, y, z)])
+                    || (y > 0 && occupied[id(x, y - 1, z)])
+                    || (y + 1 < ny && occupied[id(x, y + 1, z)])
+                    || (z > 0 && occupied[id(x, y, z - 1)])
+                    || (z + 1 < nz && occupied[id(x, y, z + 1)]);
+                solid[id(x, y, z)] = near;
+            }
+        }
+    }
+    solid
+}
+
+/// The empty cells connected to the grid's border (flood fill through
+/// cells that are not `solid`).
+fn flood_outside(solid: &[bool], dims: [usize; 3]) -> Vec<bool> {
+    let [nx, ny, nz] = dims;
+    let id = |x: usize, y: usize, z: usize| cell(dims, x, y, z);
+    // Flood fill the empty space from the border.
+    let mut outside = vec![false; solid.len()];
+    let mut stack: Vec<(usize, usize, usize)> = Vec::new();
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                let border =
+                    x == 0 || y == 0 || z == 0 || x + 1 == nx || y + 1 == ny || z + 1 == nz;
+                if border && !solid[id(x, y, z)] && !outside[id(x, y, z)] {
+                    outside[id(x, y, z)] = true;
+                    stack.push((x, y, z));
+                }
+            }
+        }
+    }
+    while let Some((x, y, z)) = stack.pop() {
+        let mut visit = |x: usize, y: usize, z: usize| {
+            let c = id(x, y, z);
+            if !solid[c] && !outside[c] {
+                outside[c] = true;
+                stack.push((x, y, z));
+            }
+        };
+        if x > 0 {
+            visit(x - 1, y, z);
+        }
+        if x + 1 < nx {
+            visit(x + 1, y, z);
+        }
+        if y > 0 {
+            visit(x, y - 1, z);
+        }
+        if y + 1 < ny {
+            visit(x, y + 1, z);
+        }
+        if z > 0 {
+            visit(x, y, z - 1);
+        }
+        if z + 1 < nz {
+            visit(x, y, z + 1);
+        }
+    }
+    outside
 }
 
 #[cfg(test)]

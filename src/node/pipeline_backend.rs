@@ -13,10 +13,9 @@ use super::backend::{
     Backend, Frame, FrameResult, ObjectReport, Output, OutputKind, StatusEntry, TopicProcessor,
 };
 use super::stats::Level;
-use crate::membrane::MembraneConfig;
-use crate::membrane::StopReason;
-use crate::pipeline::engine::{decode_sample, Processed, StreamCloud};
-use crate::pipeline::{outputs, PipelineConfig, StartPath, StreamKey, Tracker};
+use crate::membrane::{ConfigError, MembraneConfig, StopReason};
+use crate::pipeline::engine::Engine;
+use crate::pipeline::{outputs, Deadlines, Membranes, PipelineConfig, StartPath};
 use crate::transport::RosType;
 use crate::wire::msgs::{
     DiagnosticArray, DiagnosticStatus, FrameDiagnostics, Header, KeyValue, MarkerArray,
@@ -24,8 +23,6 @@ use crate::wire::msgs::{
 };
 use crate::wire::pointcloud2::WireConfig;
 use crate::wire::{self, RosMessage};
-use rayon::prelude::*;
-use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 fn ty<M: RosMessage>() -> RosType {
@@ -35,34 +32,80 @@ fn ty<M: RosMessage>() -> RosType {
 /// The production backend.
 #[derive(Debug, Clone)]
 pub struct PipelineBackend {
-    membrane: MembraneConfig,
+    membranes: Membranes,
     pipeline: PipelineConfig,
     limits: WireConfig,
 }
 
 impl PipelineBackend {
     /// A backend from the configuration sections it needs.
-    pub fn new(membrane: MembraneConfig, pipeline: PipelineConfig, limits: WireConfig) -> Self {
-        Self {
-            membrane,
+    ///
+    /// # Errors
+    /// [`ConfigError`] naming the first bad membrane key.
+    pub fn new(
+        membrane: &MembraneConfig,
+        pipeline: PipelineConfig,
+        limits: WireConfig,
+    ) -> Result<Self, ConfigError> {
+        Ok(Self {
+            membranes: Membranes::new(membrane, &pipeline)?,
             pipeline,
             limits,
-        }
+        })
     }
 
     /// A backend from the whole configuration.
-    pub fn from_config(cfg: &crate::config::Config) -> Self {
-        Self::new(cfg.membrane.clone(), cfg.pipeline.clone(), cfg.wire.clone())
+    ///
+    /// # Errors
+    /// [`ConfigError`] naming the first bad membrane key.
+    pub fn from_config(cfg: &crate::config::Config) -> Result<Self, ConfigError> {
+        Self::new(&cfg.membrane, cfg.pipeline.clone(), cfg.wire.clone())
     }
 }
 
 struct EngineProcessor {
-    membrane: MembraneConfig,
-    pipeline: PipelineConfig,
-    limits: WireConfig,
-    trackers: BTreeMap<StreamKey, Tracker>,
+    engine: Engine,
     ns: String,
     last_header: Header,
+}
+
+/// The deadlines of a frame whose node deadline is `deadline` (from its
+/// receipt): what is left of it, but never less than a quarter of the
+/// configured budget (so that a late frame still gets a few iterations; it
+/// is then counted as late); a cold start's longer budget shrinks by the
+/// same time already spent.
+fn node_deadlines(p: &PipelineConfig, deadline: Instant) -> Deadlines {
+    let now = Instant::now();
+    if p.deadline_ms <= 0.0 {
+        return Deadlines::default();
+    }
+    let remaining = deadline.saturating_duration_since(now);
+    let left = (remaining.as_secs_f64() * 1e3).max(0.25 * p.deadline_ms);
+    Deadlines::after(now, left, p.cold_budget_ms() - (p.deadline_ms - left))
+}
+
+/// The node's per-object report of a frame result.
+fn object_report(r: &crate::pipeline::FrameResult) -> ObjectReport {
+    let rep = &r.reconstruction.report;
+    let warm = r.path == StartPath::Warm;
+    let level = if rep.stop == StopReason::Deadline {
+        Level::Warn
+    } else {
+        Level::Ok
+    };
+    ObjectReport {
+        stream: r.stream.to_string(),
+        eta_g: rep.eta_final,
+        iterations: u32::try_from(r.iterations).unwrap_or(u32::MAX),
+        warm,
+        level,
+        message: format!(
+            "{} start ({}), stop: {}",
+            if warm { "warm" } else { "cold" },
+            r.reason,
+            rep.stop
+        ),
+    }
 }
 
 fn encode<M: RosMessage>(
@@ -79,104 +122,37 @@ fn encode<M: RosMessage>(
 
 impl TopicProcessor for EngineProcessor {
     fn process(&mut self, frame: &Frame) -> FrameResult {
-        let mut sample =
-            match decode_sample(&frame.topic, &frame.payload, &self.limits, &self.pipeline) {
-                Ok(s) => s,
-                Err(e) => {
-                    return FrameResult {
-                        error: Some(e.to_string()),
-                        ..FrameResult::default()
-                    }
+        // The node's deadline runs from receipt; the objects of a labelled
+        // cloud are evolved in parallel, each with what is left of it.
+        let deadlines = node_deadlines(&self.engine.pipeline, frame.deadline);
+        let out = match self
+            .engine
+            .handle(&frame.topic, &frame.payload, Some(deadlines))
+        {
+            Ok(o) => o,
+            Err(e) => {
+                return FrameResult {
+                    error: Some(e.to_string()),
+                    ..FrameResult::default()
                 }
-            };
-        self.last_header = sample.header.clone();
-        let streams = std::mem::take(&mut sample.streams);
-        // The node's deadline runs from receipt. The objects of a labelled
-        // cloud are evolved in parallel, each with what is left of it, but
-        // never less than a quarter of the configured budget (so that a late
-        // frame still gets a few iterations; it is then counted as late).
-        let mut pipeline = self.pipeline.clone();
-        // A cold start's longer budget shrinks by the same time already spent.
-        if pipeline.deadline_ms > 0.0 {
-            let remaining = frame.deadline.saturating_duration_since(Instant::now());
-            let left = (remaining.as_secs_f64() * 1e3).max(0.25 * pipeline.deadline_ms);
-            pipeline.cold_deadline_ms = pipeline.cold_budget_ms() - (pipeline.deadline_ms - left);
-            pipeline.deadline_ms = left;
-        }
-        let mut work: Vec<(Tracker, StreamCloud)> = streams
-            .into_iter()
-            .map(|s| {
-                let t = self
-                    .trackers
-                    .remove(&s.key)
-                    .unwrap_or_else(|| Tracker::new(s.key.clone()));
-                (t, s)
-            })
-            .collect();
-        let membrane = &self.membrane;
-        let outcomes: Vec<Processed> = work
-            .par_iter_mut()
-            .map(|(t, s)| Processed {
-                key: s.key.clone(),
-                points: s.cloud.len(),
-                outcome: t.process(&s.cloud, membrane, &pipeline),
-            })
-            .collect();
-        for (t, s) in work {
-            self.trackers.insert(s.key, t);
-        }
-        let processed = outcomes;
-        let mut outs = Vec::with_capacity(2 * processed.len() + 1);
+            }
+        };
+        self.last_header = out.sample.header.clone();
+        let msgs = out.messages(&self.ns);
+        let mut outs = Vec::with_capacity(2 * msgs.objects.len() + 1);
         let mut errors = Vec::new();
-        let mut objects = Vec::with_capacity(processed.len());
-        let mut ok = Vec::with_capacity(processed.len());
-        for p in &processed {
+        for (mesh, diag) in &msgs.objects {
+            encode(OutputKind::Mesh, mesh, &mut outs, &mut errors);
+            encode(OutputKind::FrameDiagnostics, diag, &mut outs, &mut errors);
+        }
+        encode(OutputKind::Markers, &msgs.markers, &mut outs, &mut errors);
+        let mut objects = Vec::with_capacity(out.processed.len());
+        for p in &out.processed {
             match &p.outcome {
-                Ok(r) => {
-                    let rep = &r.reconstruction.report;
-                    encode(
-                        OutputKind::Mesh,
-                        &outputs::surface_mesh(r, &sample.header),
-                        &mut outs,
-                        &mut errors,
-                    );
-                    encode(
-                        OutputKind::FrameDiagnostics,
-                        &outputs::frame_diagnostics(
-                            r,
-                            &sample.header,
-                            sample.points_in,
-                            sample.dropped,
-                        ),
-                        &mut outs,
-                        &mut errors,
-                    );
-                    let warm = r.path == StartPath::Warm;
-                    let level = if rep.stop == StopReason::Deadline {
-                        Level::Warn
-                    } else {
-                        Level::Ok
-                    };
-                    objects.push(ObjectReport {
-                        stream: r.stream.to_string(),
-                        eta_g: rep.eta_final,
-                        iterations: u32::try_from(r.iterations).unwrap_or(u32::MAX),
-                        warm,
-                        level,
-                        message: format!(
-                            "{} start ({}), stop: {}",
-                            if warm { "warm" } else { "cold" },
-                            r.reason,
-                            rep.stop
-                        ),
-                    });
-                    ok.push(r);
-                }
+                Ok(r) => objects.push(object_report(r)),
                 Err(e) => errors.push(e.to_string()),
             }
         }
-        let markers: MarkerArray = outputs::marker_array(&ok, &sample.header, &self.ns);
-        encode(OutputKind::Markers, &markers, &mut outs, &mut errors);
         FrameResult {
             outputs: outs,
             objects,
@@ -225,10 +201,11 @@ impl Backend for PipelineBackend {
 
     fn processor(&self, _topic: &str) -> Box<dyn TopicProcessor> {
         Box::new(EngineProcessor {
-            membrane: self.membrane.clone(),
-            pipeline: self.pipeline.clone(),
-            limits: self.limits.clone(),
-            trackers: BTreeMap::new(),
+            engine: Engine::with_membranes(
+                self.membranes.clone(),
+                self.pipeline.clone(),
+                self.limits.clone(),
+            ),
             ns: self.pipeline.marker_namespace.clone(),
             last_header: Header::default(),
         })

@@ -1,17 +1,21 @@
-//! A sequential frame engine: raw CDR `PointCloud2` samples in, processed
-//! frames out, one [`Tracker`] per object stream.
+//! The one frame path: decode → track → reconstruct → output messages.
 //!
-//! `sepmem replay` drives it from a bag; the live node uses the same pieces
-//! ([`split_streams`], [`Tracker`], [`super::outputs`]) but runs the trackers
-//! of different streams in parallel.
+//! [`Engine::handle`] takes a raw CDR `PointCloud2` sample, decodes and
+//! splits it into object streams, runs each stream's [`Tracker`] (the
+//! streams of one sample in parallel: they share no state) and
+//! [`FrameOutput::messages`] builds the messages of the frame. The live
+//! node (`node::pipeline_backend`), `sepmem replay` and the scored replay of
+//! [`crate::eval`] all go through it, so they publish the same meshes for
+//! the same samples.
 
-use super::{PipelineConfig, PipelineError, StreamKey, Tracker};
+use super::{outputs, Deadlines, Membranes, PipelineConfig, PipelineError, StreamKey, Tracker};
 use crate::cloud::PointCloud;
-use crate::membrane::MembraneConfig;
-use crate::wire::msgs::Header;
+use crate::membrane::{ConfigError, MembraneConfig};
+use crate::wire::msgs::{FrameDiagnostics, Header, MarkerArray, SurfaceMesh};
 use crate::wire::pointcloud2::{
     decode_pointcloud2_cdr, split_by_label, PointCloud2Error, WireConfig,
 };
+use rayon::prelude::*;
 use std::collections::BTreeMap;
 use thiserror::Error;
 
@@ -110,8 +114,8 @@ pub struct Processed {
 /// Trackers for every stream seen so far, processed one after the other.
 #[derive(Debug, Clone)]
 pub struct Engine {
-    /// Membrane parameters.
-    pub membrane: MembraneConfig,
+    /// The membranes (built once from the membrane parameters).
+    pub membranes: Membranes,
     /// Pipeline parameters.
     pub pipeline: PipelineConfig,
     /// Input limits.
@@ -121,16 +125,36 @@ pub struct Engine {
 
 impl Engine {
     /// An engine with no streams yet.
-    pub fn new(membrane: MembraneConfig, pipeline: PipelineConfig, limits: WireConfig) -> Self {
+    ///
+    /// # Errors
+    /// [`ConfigError`] naming the first bad membrane key.
+    pub fn new(
+        membrane: &MembraneConfig,
+        pipeline: PipelineConfig,
+        limits: WireConfig,
+    ) -> Result<Self, ConfigError> {
+        let membranes = Membranes::new(membrane, &pipeline)?;
+        Ok(Self::with_membranes(membranes, pipeline, limits))
+    }
+
+    /// An engine on membranes built before (a node shares them, with their
+    /// fit cache, between its topics).
+    pub fn with_membranes(
+        membranes: Membranes,
+        pipeline: PipelineConfig,
+        limits: WireConfig,
+    ) -> Self {
         Self {
-            membrane,
+            membranes,
             pipeline,
             limits,
             trackers: BTreeMap::new(),
         }
     }
 
-    /// Decode one sample and process each of its streams.
+    /// Decode one sample and process each of its streams (in parallel)
+    /// under `deadlines` (`None`: each tracker's own, from the pipeline
+    /// configuration, measured from its start).
     ///
     /// # Errors
     /// [`SampleError`] when the sample cannot be decoded; per-stream failures
@@ -139,26 +163,50 @@ impl Engine {
         &mut self,
         topic: &str,
         cdr: &[u8],
-    ) -> Result<(DecodedSample, Vec<Processed>), SampleError> {
-        let mut sample = decode_sample(topic, cdr, &self.limits, &self.pipeline)?;
-        let streams = std::mem::take(&mut sample.streams);
-        let out = streams.into_iter().map(|s| self.process(s)).collect();
-        Ok((sample, out))
+        deadlines: Option<Deadlines>,
+    ) -> Result<FrameOutput, SampleError> {
+        let sample = decode_sample(topic, cdr, &self.limits, &self.pipeline)?;
+        let mut work: Vec<(Tracker, &StreamCloud)> = sample
+            .streams
+            .iter()
+            .map(|s| {
+                let t = self
+                    .trackers
+                    .remove(&s.key)
+                    .unwrap_or_else(|| Tracker::new(s.key.clone()));
+                (t, s)
+            })
+            .collect();
+        let (membranes, pipeline) = (&self.membranes, &self.pipeline);
+        let processed = work
+            .par_iter_mut()
+            .map(|(t, s)| Processed {
+                key: s.key.clone(),
+                points: s.cloud.len(),
+                outcome: match deadlines {
+                    Some(d) => t.process_by(&s.cloud, membranes, pipeline, d),
+                    None => t.process(&s.cloud, membranes, pipeline),
+                },
+            })
+            .collect();
+        for (t, s) in work {
+            self.trackers.insert(s.key.clone(), t);
+        }
+        Ok(FrameOutput { sample, processed })
     }
 
-    /// Process one stream's cloud.
+    /// Process one stream's cloud on its own.
     pub fn process(&mut self, s: StreamCloud) -> Processed {
         self.process_ref(&s)
     }
 
-    /// Process one stream's cloud, leaving it to the caller (e.g. to score
-    /// the result against the points afterwards).
+    /// Process one stream's cloud on its own, leaving it to the caller.
     pub fn process_ref(&mut self, s: &StreamCloud) -> Processed {
         let tracker = self
             .trackers
             .entry(s.key.clone())
             .or_insert_with(|| Tracker::new(s.key.clone()));
-        let outcome = tracker.process(&s.cloud, &self.membrane, &self.pipeline);
+        let outcome = tracker.process(&s.cloud, &self.membranes, &self.pipeline);
         Processed {
             key: s.key.clone(),
             points: s.cloud.len(),
@@ -169,5 +217,57 @@ impl Engine {
     /// The trackers, by stream.
     pub fn trackers(&self) -> &BTreeMap<StreamKey, Tracker> {
         &self.trackers
+    }
+}
+
+/// One sample through the frame path: the decoded sample (its streams'
+/// clouds kept, e.g. for scoring) and one outcome per stream, in order.
+#[derive(Debug)]
+pub struct FrameOutput {
+    /// The decoded sample.
+    pub sample: DecodedSample,
+    /// One outcome per stream of `sample.streams`.
+    pub processed: Vec<Processed>,
+}
+
+/// The messages of one frame.
+#[derive(Debug, Clone)]
+pub struct FrameMessages {
+    /// One mesh and one diagnostics message per reconstructed object.
+    pub objects: Vec<(SurfaceMesh, FrameDiagnostics)>,
+    /// DELETEALL, then a TRIANGLE_LIST per reconstructed object.
+    pub markers: MarkerArray,
+}
+
+impl FrameOutput {
+    /// The successful frames, in stream order.
+    pub fn results(&self) -> Vec<&super::FrameResult> {
+        self.processed
+            .iter()
+            .filter_map(|p| p.outcome.as_ref().ok())
+            .collect()
+    }
+
+    /// The output messages of the frame (marker namespace `ns`).
+    pub fn messages(&self, ns: &str) -> FrameMessages {
+        let header = &self.sample.header;
+        let ok = self.results();
+        FrameMessages {
+            objects: ok
+                .iter()
+                .map(|r| {
+                    (
+                        outputs::surface_mesh(r, header),
+                        outputs::frame_diagnostics(
+                            r,
+                            header,
+                            self.sample.points_in,
+                            self.sample.dropped,
+                        ),
+                    )
+                })
+                .collect(),
+            markers: outputs::marker_array(&ok, header, ns),
+        }
     }
 }

@@ -20,15 +20,19 @@
 //!
 //! Streams never share state, so an error in one cannot affect another.
 //! Replays of bags with ground truth are scored frame by frame with
-//! [`score`].
+//! [`crate::eval`].
 
 pub mod align;
 pub mod engine;
 pub mod outputs;
-pub mod score;
+
+pub use crate::stream::StreamKey;
 
 use crate::cloud::{PointCloud, Vec3};
-use crate::membrane::{self, Budget, MembraneConfig, MembraneError, Reconstruction, WarmStart};
+use crate::membrane::{
+    self, Budget, ConfigError, Membrane, MembraneConfig, MembraneError, Reconstruction, Start,
+    WarmStart,
+};
 use crate::mesh::TriMesh;
 use crate::spline::ClosedSurface;
 use serde::{Deserialize, Serialize};
@@ -142,35 +146,6 @@ pub enum PipelineError {
         /// Cause.
         source: MembraneError,
     },
-}
-
-/// Identity of an object stream: a topic, and a segment label when the
-/// topic's clouds carry several labelled objects.
-#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-pub struct StreamKey {
-    /// Topic name (ROS style, e.g. `/seg/points`).
-    pub topic: String,
-    /// Segment label, if the stream is one label of a labelled cloud.
-    pub label: Option<i64>,
-}
-
-impl StreamKey {
-    /// A stream for a whole topic.
-    pub fn topic(topic: impl Into<String>) -> Self {
-        Self {
-            topic: topic.into(),
-            label: None,
-        }
-    }
-}
-
-impl fmt::Display for StreamKey {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self.label {
-            Some(l) => write!(f, "{}#{l}", self.topic),
-            None => f.write_str(&self.topic),
-        }
-    }
 }
 
 /// Which start a frame took.
@@ -360,13 +335,28 @@ impl Tracker {
     pub fn process(
         &mut self,
         cloud: &PointCloud,
-        membrane: &MembraneConfig,
+        membranes: &Membranes,
         cfg: &PipelineConfig,
     ) -> Result<FrameResult, PipelineError> {
         let start = Instant::now();
+        self.process_by(cloud, membranes, cfg, Deadlines::from_config(start, cfg))
+    }
+
+    /// [`Self::process`] with the frame's deadlines given by the caller
+    /// (the node's run from the sample's receipt).
+    ///
+    /// # Errors
+    /// As [`Self::process`].
+    pub fn process_by(
+        &mut self,
+        cloud: &PointCloud,
+        membranes: &Membranes,
+        cfg: &PipelineConfig,
+        deadlines: Deadlines,
+    ) -> Result<FrameResult, PipelineError> {
         let frame = self.stats.frames;
         self.stats.frames += 1;
-        let result = self.process_inner(cloud, membrane, cfg, start, frame);
+        let result = self.process_inner(cloud, membranes, cfg, deadlines, frame);
         match &result {
             Ok(r) => match r.path {
                 StartPath::Warm => self.stats.warm += 1,
@@ -380,11 +370,12 @@ impl Tracker {
     fn process_inner(
         &mut self,
         cloud: &PointCloud,
-        membrane_cfg: &MembraneConfig,
+        membranes: &Membranes,
         cfg: &PipelineConfig,
-        start: Instant,
+        deadlines: Deadlines,
         frame: u64,
     ) -> Result<FrameResult, PipelineError> {
+        let start = Instant::now();
         let finite = cloud
             .points
             .iter()
@@ -398,17 +389,17 @@ impl Tracker {
             });
         }
         let cloud = &*thinned(cloud, cfg);
-        let deadline_after =
-            |ms: f64| (ms > 0.0).then(|| start + Duration::from_secs_f64(ms / 1e3));
-        let deadline = deadline_after(cfg.deadline_ms);
-        let cold_deadline = deadline_after(cfg.cold_budget_ms());
+        let Deadlines {
+            warm: deadline,
+            cold: cold_deadline,
+        } = deadlines;
         let centroid = cloud.centroid().unwrap_or_else(Vec3::zeros);
         let size = cloud.aabb().longest_edge();
 
         let (path, mut reason, warm, motion) = self.choose_path(cloud, centroid, size, cfg);
         let cap = match path {
             StartPath::Warm => cfg.warm_max_iterations.max(1),
-            StartPath::Cold => cold_cap(membrane_cfg, cfg),
+            StartPath::Cold => cold_cap(membranes.cold.config(), cfg),
         };
         let budget = Budget {
             max_iterations: Some(cap),
@@ -425,17 +416,12 @@ impl Tracker {
             stream: self.key.to_string(),
             source,
         };
-        let warm_cfg;
-        let attempt_cfg = if path == StartPath::Warm && cfg.warm_density_sample > 0 {
-            warm_cfg = MembraneConfig {
-                density_sample: cfg.warm_density_sample,
-                ..membrane_cfg.clone()
-            };
-            &warm_cfg
-        } else {
-            membrane_cfg
+        let (engine, start_from) = match warm {
+            Some(w) => (&membranes.warm, Start::Warm(w)),
+            None => (&membranes.cold, Start::Cold),
         };
-        let mut rec = membrane::reconstruct(cloud, attempt_cfg, &budget, warm.as_ref())
+        let mut rec = engine
+            .reconstruct(cloud, &budget, &start_from)
             .map_err(membrane_err)?;
         let mut iterations = rec.report.iterations;
         let mut final_path = path;
@@ -450,11 +436,13 @@ impl Tracker {
                 if failed || drifted {
                     self.stats.fallbacks += 1;
                     let budget = Budget {
-                        max_iterations: Some(cold_cap(membrane_cfg, cfg)),
+                        max_iterations: Some(cold_cap(membranes.cold.config(), cfg)),
                         deadline: cold_deadline,
                         min_iterations: 0,
                     };
-                    let cold = membrane::reconstruct(cloud, membrane_cfg, &budget, None)
+                    let cold = membranes
+                        .cold
+                        .reconstruct(cloud, &budget, &Start::Cold)
                         .map_err(membrane_err)?;
                     iterations += cold.report.iterations;
                     reason = if failed {
@@ -492,7 +480,7 @@ impl Tracker {
         if final_path == StartPath::Cold && cfg.warm_start {
             let [m, l] = rec.report.grid;
             // Best effort: a failure here only means the next frame factors it.
-            if let Err(e) = membrane::evolve::prefactor_warm(membrane_cfg, m, l) {
+            if let Err(e) = membranes.warm.prefactor_warm(m, l) {
                 tracing::debug!(stream = %self.key, "warm fit not prepared: {e}");
             }
         }
@@ -580,6 +568,59 @@ impl Tracker {
                 Some(motion),
             ),
             Err(_) => cold(PathReason::FirstFrame),
+        }
+    }
+}
+
+/// The membranes a frame pipeline uses, built once from the `membrane`
+/// section: one for cold starts, and its variant for warm-started frames
+/// (`pipeline.warm_density_sample`), sharing its fit cache.
+#[derive(Debug, Clone)]
+pub struct Membranes {
+    /// Cold starts (and the cold redo of a failed warm start).
+    pub cold: Membrane,
+    /// Warm-started frames.
+    pub warm: Membrane,
+}
+
+impl Membranes {
+    /// Validate the membrane section and build both engines.
+    ///
+    /// # Errors
+    /// [`ConfigError`] naming the first bad membrane key.
+    pub fn new(membrane: &MembraneConfig, cfg: &PipelineConfig) -> Result<Self, ConfigError> {
+        let cold = Membrane::new(membrane.clone())?;
+        let warm = if cfg.warm_density_sample > 0 {
+            cold.variant(|m| m.density_sample = cfg.warm_density_sample)?
+        } else {
+            cold.clone()
+        };
+        Ok(Self { cold, warm })
+    }
+}
+
+/// The wall-clock deadlines of one frame (`None`: none).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Deadlines {
+    /// Of a warm-started attempt.
+    pub warm: Option<Instant>,
+    /// Of a cold start, or the cold redo of a failed warm start.
+    pub cold: Option<Instant>,
+}
+
+impl Deadlines {
+    /// `pipeline.deadline_ms` and the cold budget
+    /// ([`PipelineConfig::cold_budget_ms`]) from `start`.
+    pub fn from_config(start: Instant, cfg: &PipelineConfig) -> Self {
+        Self::after(start, cfg.deadline_ms, cfg.cold_budget_ms())
+    }
+
+    /// `warm_ms` and `cold_ms` after `start` (0: no deadline).
+    pub fn after(start: Instant, warm_ms: f64, cold_ms: f64) -> Self {
+        let at = |ms: f64| (ms > 0.0).then(|| start + Duration::from_secs_f64(ms / 1e3));
+        Self {
+            warm: at(warm_ms),
+            cold: at(cold_ms),
         }
     }
 }

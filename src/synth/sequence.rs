@@ -10,7 +10,7 @@
 //! the `label` field (labels 1, 2, …; outliers carry label 0). The ground
 //! truth of every object in every frame goes to [`GROUND_TRUTH_TOPIC`] as a
 //! `sepmem_msgs/msg/GroundTruth` whose `stream_id` is the
-//! [`StreamKey`](crate::pipeline::StreamKey) of the stream the object lands
+//! [`StreamKey`](crate::stream::StreamKey) of the stream the object lands
 //! in (`topic` or `topic#label`) and whose stamp equals the cloud's; the mesh
 //! (in the object frame) is sent only in the stream's first message, so that
 //! every replayed frame can be scored against the full, closed surface even
@@ -31,7 +31,7 @@ use super::{
 use crate::bag::{BagError, BagWriter, Qos};
 use crate::cloud::Vec3;
 use crate::mesh::TriMesh;
-use crate::pipeline::StreamKey;
+use crate::stream::StreamKey;
 use crate::wire::msgs::{
     GroundTruth, Header, MeshTriangle, Point, PointCloud2, Pose, Quaternion, Time,
 };

@@ -1,6 +1,6 @@
 //! Ground truth read back from a bag: the `sepmem_msgs/msg/GroundTruth`
 //! side channel written by [`crate::synth::sequence`], indexed by stream id
-//! (`topic` or `topic#label`, the [`StreamKey`](crate::pipeline::StreamKey)
+//! (`topic` or `topic#label`, the [`StreamKey`](crate::stream::StreamKey)
 //! display string) and stamp, so that every replayed frame can be scored.
 //!
 //! A stream's first message carries the mesh in the object frame; every

@@ -1,5 +1,8 @@
-//! Per-frame scoring of a stream's mesh against its ground truth (replay of
-//! bags that carry the `sepmem_msgs/msg/GroundTruth` side channel).
+//! Evaluation of the frame pipeline against ground truth: per-frame scoring
+//! of a stream's mesh (replay of bags that carry the
+//! `sepmem_msgs/msg/GroundTruth` side channel written by [`crate::synth`]),
+//! the cold references of the warm-versus-cold check, and a scored replay.
+//! It sits above the pipeline and the simulator, which know nothing of it.
 //!
 //! The scores follow the ONet / SAP protocol of [`crate::metrics`] (paper
 //! §IV-C): both meshes are normalised by the ground truth's bounding box
@@ -296,7 +299,7 @@ mod tests {
 
 /// The cold references of a frame: `repeats` cold starts of `cloud` (no
 /// deadline, the cold iteration cap), each on another thinning subset
-/// ([`super::thinned_subset`]; the first is the pipeline's own). With more
+/// ([`crate::pipeline::thinned_subset`]; the first is the pipeline's own). With more
 /// than one, their spread measures how reproducible a cold start of the
 /// frame is: a single view's unseen side is not determined by the data,
 /// and which 2,500 of 20,000 points were kept moves a cold start's F-score
@@ -307,22 +310,19 @@ mod tests {
 /// The first failing reconstruction's [`crate::membrane::MembraneError`].
 pub fn cold_references(
     cloud: &crate::cloud::PointCloud,
-    cfg: &crate::config::Config,
+    membrane: &crate::membrane::Membrane,
+    pipeline: &crate::pipeline::PipelineConfig,
     repeats: usize,
 ) -> Result<Vec<crate::membrane::Reconstruction>, crate::membrane::MembraneError> {
     let budget = crate::membrane::Budget {
-        max_iterations: Some(super::cold_cap(&cfg.membrane, &cfg.pipeline)),
+        max_iterations: Some(crate::pipeline::cold_cap(membrane.config(), pipeline)),
         deadline: None,
         min_iterations: 0,
     };
     (0..repeats as u64)
         .map(|k| {
-            crate::membrane::reconstruct(
-                &super::thinned_subset(cloud, &cfg.pipeline, k),
-                &cfg.membrane,
-                &budget,
-                None,
-            )
+            let thinned = crate::pipeline::thinned_subset(cloud, pipeline, k);
+            membrane.reconstruct(&thinned, &budget, &crate::membrane::Start::Cold)
         })
         .collect()
 }
@@ -331,13 +331,13 @@ pub fn cold_references(
 #[derive(Debug, Clone)]
 pub struct ScoredFrame {
     /// Stream.
-    pub key: super::StreamKey,
+    pub key: crate::pipeline::StreamKey,
     /// Stamp of the cloud (ns since the epoch).
     pub stamp_ns: i64,
     /// Points of the stream in the frame.
     pub points: usize,
     /// The pipeline's result (mesh, path, iterations, latency…).
-    pub result: super::FrameResult,
+    pub result: crate::pipeline::FrameResult,
     /// Score against the ground truth, when the bag has it for this frame.
     pub score: Option<FrameScore>,
     /// The cold references of the same frame ([`cold_references`]; empty
@@ -356,13 +356,16 @@ pub enum ScoredReplayError {
     Truth(#[from] crate::synth::truth::TruthError),
     /// A sample did not decode.
     #[error(transparent)]
-    Sample(#[from] super::engine::SampleError),
+    Sample(#[from] crate::pipeline::engine::SampleError),
     /// The pipeline failed on a frame.
     #[error(transparent)]
-    Frame(#[from] super::PipelineError),
+    Frame(#[from] crate::pipeline::PipelineError),
     /// The cold reference failed.
     #[error("cold reference: {0}")]
     Cold(#[from] crate::membrane::MembraneError),
+    /// The membrane configuration is invalid.
+    #[error(transparent)]
+    Config(#[from] crate::membrane::ConfigError),
     /// Scoring failed.
     #[error("scoring: {0}")]
     Score(#[from] MetricsError),
@@ -380,7 +383,7 @@ pub fn replay_scored(
     cfg: &crate::config::Config,
     cold_repeats: usize,
 ) -> Result<Vec<ScoredFrame>, ScoredReplayError> {
-    use super::engine::{decode_sample, Engine};
+    use crate::pipeline::engine::Engine;
     let truth = crate::synth::truth::GroundTruthIndex::from_bag(bag)?;
     let sc = ScoreConfig::from_config(cfg);
     let topics: Vec<&str> = bag
@@ -389,28 +392,33 @@ pub fn replay_scored(
         .filter(|t| t.type_name == "sensor_msgs/msg/PointCloud2")
         .map(|t| t.name.as_str())
         .collect();
-    let mut engine = Engine::new(cfg.membrane.clone(), cfg.pipeline.clone(), cfg.wire.clone());
+    let mut engine = Engine::new(&cfg.membrane, cfg.pipeline.clone(), cfg.wire.clone())?;
     let mut out = Vec::new();
     for m in bag.read(&topics)? {
-        let sample = decode_sample(&m.topic, &m.data, &cfg.wire, &cfg.pipeline)?;
-        let stamp_ns = sample.header.stamp.to_nanos();
-        for s in &sample.streams {
-            let result = engine.process_ref(s).outcome?;
+        let frame = engine.handle(&m.topic, &m.data, None)?;
+        let stamp_ns = frame.sample.header.stamp.to_nanos();
+        for (s, p) in frame.sample.streams.iter().zip(frame.processed) {
+            let result = p.outcome?;
             let gt = truth.posed_mesh(&s.key.to_string(), stamp_ns);
             let score = gt
                 .as_ref()
                 .map(|gt| score_frame(&result.reconstruction.mesh, gt, &s.cloud.points, &sc))
                 .transpose()?;
-            let cold = cold_references(&s.cloud, cfg, cold_repeats)?
-                .iter()
-                .map(|rec| {
-                    let cs = gt
-                        .as_ref()
-                        .map(|gt| score_frame(&rec.mesh, gt, &s.cloud.points, &sc))
-                        .transpose()?;
-                    Ok((rec.report.iterations, cs))
-                })
-                .collect::<Result<Vec<_>, MetricsError>>()?;
+            let cold = cold_references(
+                &s.cloud,
+                &engine.membranes.cold,
+                &cfg.pipeline,
+                cold_repeats,
+            )?
+            .iter()
+            .map(|rec| {
+                let cs = gt
+                    .as_ref()
+                    .map(|gt| score_frame(&rec.mesh, gt, &s.cloud.points, &sc))
+                    .transpose()?;
+                Ok((rec.report.iterations, cs))
+            })
+            .collect::<Result<Vec<_>, MetricsError>>()?;
             out.push(ScoredFrame {
                 key: s.key.clone(),
                 stamp_ns,

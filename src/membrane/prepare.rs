@@ -1,0 +1,374 @@
+//! What the evolution needs from a cloud, prepared once per reconstruction
+//! (and shared by its pole-axis candidates): the finite, distinct points,
+//! thinned to `max_points`; the k-NN outlier filter; the point spacing δ
+//! (paper Eq. 5); a single view's viewpoint and mirrored completion; the
+//! spatial index of the search; the attribute channels of the weighted
+//! separability (Eq. 9); the occupancy grid of the inward force.
+//!
+//! δ is the median of the per-point mean k-NN distances d_i for a single
+//! view, where the spacing varies with depth and incidence, and
+//! `delta_scale` × their `delta_quantile` for a whole object (1.3 × the
+//! lower quartile by default, which measures the surface's own spacing even
+//! when up to half the points are outliers: the prototype's outlier runs,
+//! `notes/prototype-findings.md`).
+
+use super::config::MembraneConfig;
+use super::occupancy::OutsideGrid;
+use super::{view, MembraneError};
+use crate::cloud::{Aabb, CloudError, PointCloud, Vec3};
+use crate::density::{median_of, Density};
+use crate::separability::attribute::{AttributeSet, AttributeWeights, ChannelWeight};
+use crate::separability::grid::SpatialIndex;
+use std::collections::HashSet;
+use std::time::Instant;
+
+/// Smallest number of points the membrane accepts.
+pub const MIN_POINTS: usize = 16;
+
+/// Radius of the `density` attribute (neighbour count), in multiples of δ.
+const DENSITY_ATTRIBUTE_RADIUS: f64 = 2.0;
+
+/// The prepared points of one reconstruction.
+pub(crate) struct Prepared {
+    pub(crate) counts: PointCounts,
+    /// The used points (finite, thinned, outlier-filtered, plus a single
+    /// view's completion).
+    pub(crate) points: Vec<Vec3>,
+    /// The d_i of the used points (δ where only δ is known).
+    pub(crate) d_used: Vec<f64>,
+    pub(crate) delta: f64,
+    /// Longest bounding-box edge of the used points.
+    pub(crate) scale: f64,
+    pub(crate) view: Option<view::ViewBuffer>,
+    pub(crate) index: SpatialIndex,
+    pub(crate) attributes: Option<AttributeSet>,
+    pub(crate) outside: Option<OutsideGrid>,
+    pub(crate) prepare_ms: f64,
+}
+
+/// What the preparation did with the input points (see [`super::Report`]).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PointCounts {
+    pub(crate) input: usize,
+    pub(crate) non_finite: usize,
+    pub(crate) duplicate: usize,
+    pub(crate) thinned: usize,
+    pub(crate) outliers: usize,
+    pub(crate) completed: usize,
+}
+
+impl Prepared {
+    /// Whether the cloud was taken as a single depth view.
+    pub(crate) fn is_single_view(&self) -> bool {
+        self.view.is_some()
+    }
+}
+
+/// The indices of `cloud`'s finite points, exact repeats dropped (they
+/// carry no new geometry, and many of them would collapse the k-NN
+/// distances and with them δ), and how many were non-finite.
+fn finite_distinct(cloud: &PointCloud) -> (Vec<usize>, usize) {
+    let finite: Vec<usize> = cloud
+        .points
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.iter().all(|c| c.is_finite()))
+        .map(|(i, _)| i)
+        .collect();
+    let non_finite = cloud.len() - finite.len();
+    let mut seen = HashSet::with_capacity(finite.len());
+    let distinct = finite
+        .into_iter()
+        .filter(|&i| {
+            let p = cloud.points[i];
+            seen.insert([p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
+        })
+        .collect();
+    (distinct, non_finite)
+}
+
+/// The `q` quantile of `d` (reordering it), at least `1e-9 · scale`.
+fn quantile(d: &mut [f64], q: f64, scale: f64) -> f64 {
+    let at = ((d.len() as f64 * q) as usize).min(d.len().saturating_sub(1));
+    d.select_nth_unstable_by(at, f64::total_cmp)
+        .1
+        .max(1e-9 * scale)
+}
+
+/// Prepare `cloud` (see the module docs).
+pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepared, MembraneError> {
+    let t_start = Instant::now();
+    let points_in = cloud.len();
+    // Indices (into `cloud`) of the points kept by each step, so that the
+    // attribute channels of the weighted mode follow the same selection.
+    let (finite_idx, non_finite) = finite_distinct(cloud);
+    let duplicate = points_in - non_finite - finite_idx.len();
+    let finite_len = finite_idx.len();
+    let finite_idx = thin(finite_idx, cfg.max_points);
+    let thinned = finite_len - finite_idx.len();
+    let finite: Vec<Vec3> = finite_idx.iter().map(|&i| cloud.points[i]).collect();
+    if finite.is_empty() {
+        return Err(CloudError::Empty.into());
+    }
+    if finite.len() < MIN_POINTS {
+        let got = finite.len();
+        return Err(CloudError::TooFewPoints {
+            got,
+            need: MIN_POINTS,
+        }
+        .into());
+    }
+    let (keep, d_kept) =
+        if cfg.density_sample > 0 && finite.len() > cfg.density_sample && !cfg.local_delta {
+            sampled_density(&finite, cfg)?
+        } else {
+            exact_density(&finite, cfg)?
+        };
+    let points: Vec<Vec3> = keep.iter().map(|&k| finite[k]).collect();
+    let outliers = finite.len() - points.len();
+    let e = Aabb::from_points(&points).extent();
+    let scale = e.max();
+    if scale.is_nan() || scale <= 0.0 || e.min() < 1e-6 * scale {
+        return Err(CloudError::Degenerate {
+            extent: [e.x, e.y, e.z],
+        }
+        .into());
+    }
+    let mut d_order = d_kept.clone();
+    let median = quantile(&mut d_order, 0.5, scale);
+    // Single views: the viewpoint, its z-buffer, and the mirrored completion
+    // of the unseen side (membrane/view.rs).
+    let mut view = view::resolve(cfg.viewpoint, &points, median);
+    let delta = if view.is_some() {
+        median
+    } else {
+        (quantile(&mut d_order, cfg.delta_quantile, scale) * cfg.delta_scale).max(1e-9 * scale)
+    };
+    // Per-point d_i of the used points (the sampled density knows only δ).
+    let mut d_used = if d_kept.len() == points.len() {
+        d_kept
+    } else {
+        vec![delta; points.len()]
+    };
+    let mut points = points;
+    let completed = complete_view(cfg, view.as_mut(), &mut points, &mut d_used);
+    let index = SpatialIndex::new(&points)?;
+    // Weighted mode (paper Eq. 9): the attribute channels of the used points.
+    let attributes = if cfg.attributes.is_empty() && cfg.spatial_weight == 1.0 {
+        None
+    } else {
+        let used: Vec<usize> = keep.iter().map(|&k| finite_idx[k]).collect();
+        Some(attribute_set(&cloud.select(&used), cfg, delta)?)
+    };
+    let outside = outside_grid(cfg, &points, delta, view.as_ref());
+    Ok(Prepared {
+        counts: PointCounts {
+            input: points_in,
+            non_finite,
+            duplicate,
+            thinned,
+            outliers,
+            completed,
+        },
+        points,
+        d_used,
+        delta,
+        scale,
+        view,
+        index,
+        attributes,
+        outside,
+        prepare_ms: t_start.elapsed().as_secs_f64() * 1e3,
+    })
+}
+
+/// A single view's mirrored completion of its unseen side
+/// (`view_completion`), appended to `points` and `d_used` (each mirror
+/// point takes its source's d_i); returns how many were added.
+fn complete_view(
+    cfg: &MembraneConfig,
+    view: Option<&mut view::ViewBuffer>,
+    points: &mut Vec<Vec3>,
+    d_used: &mut Vec<f64>,
+) -> usize {
+    let Some(vb) = view.filter(|_| cfg.view_completion) else {
+        return 0;
+    };
+    let extra = vb.complete(points);
+    vb.set_back(extra.iter().map(|(q, _)| q));
+    points.reserve(extra.len());
+    d_used.reserve(extra.len());
+    let added = extra.len();
+    for (q, i) in extra {
+        points.push(q);
+        d_used.push(d_used[i]);
+    }
+    added
+}
+
+/// The occupancy grid of the inward force (`None` when it is off or the
+/// grid would be too large). The occluded back of a single view is
+/// unknown, not empty — except beyond the back of the completion.
+fn outside_grid(
+    cfg: &MembraneConfig,
+    points: &[Vec3],
+    delta: f64,
+    view: Option<&view::ViewBuffer>,
+) -> Option<OutsideGrid> {
+    if !cfg.inward_force {
+        return None;
+    }
+    OutsideGrid::new(
+        points,
+        cfg.inward_voxel_delta * delta,
+        cfg.inward_min_points,
+        1 << 22,
+    )
+    .map(|mut g| {
+        if let Some(vb) = view {
+            g.restrict(|c| vb.is_seen_free(c) || vb.is_beyond_back(c));
+        }
+        g
+    })
+}
+
+/// The attribute channels and weights of the weighted separability (paper
+/// Eq. 9) named by `membrane.attributes` / `membrane.spatial_weight`, taken
+/// from `cloud` (the used points). `intensity`, `luma` (colour from `r, g, b`)
+/// and `density` are the built-in channels; any other name is a float
+/// channel of the input.
+///
+/// # Errors
+/// [`MembraneError::MissingAttribute`] when the cloud lacks a named channel;
+/// [`MembraneError::Config`] for a bad weight.
+fn attribute_set(
+    cloud: &PointCloud,
+    cfg: &MembraneConfig,
+    delta: f64,
+) -> Result<AttributeSet, MembraneError> {
+    let mut w = AttributeWeights {
+        point: cfg.spatial_weight,
+        intensity: 0.0,
+        luma: 0.0,
+        density: 0.0,
+        channels: Vec::new(),
+    };
+    for a in &cfg.attributes {
+        match a.name.as_str() {
+            "intensity" => w.intensity += a.weight,
+            "luma" => w.luma += a.weight,
+            "density" => w.density += a.weight,
+            other => w.channels.push(ChannelWeight {
+                name: other.to_string(),
+                weight: a.weight,
+            }),
+        }
+    }
+    let set = AttributeSet::from_cloud(cloud, &w, delta, DENSITY_ATTRIBUTE_RADIUS)
+        .map_err(|e| super::ConfigError::new("attributes", e.to_string()))?;
+    if let Some(name) = set.missing().first() {
+        return Err(MembraneError::MissingAttribute(name.clone()));
+    }
+    if set.total_weight() <= 0.0 {
+        return Err(super::ConfigError::new(
+            "spatial_weight",
+            "the spatial weight and the attribute weights sum to 0",
+        )
+        .into());
+    }
+    Ok(set)
+}
+
+/// Keep at most `cap` of `points` (0 = all): the points whose index hash
+/// falls below `cap/len`, a deterministic pseudo-random subsample that does
+/// not alias with scan-line order. Exactly `cap` points are kept.
+pub fn thin<T>(points: Vec<T>, cap: usize) -> Vec<T> {
+    let n = points.len();
+    if cap == 0 || n <= cap {
+        return points;
+    }
+    // SplitMix64 of the index: a fixed pseudo-random key per index.
+    let key = |i: usize| -> u64 {
+        let mut z = (i as u64).wrapping_add(0x9E37_79B9_7F4A_7C15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    };
+    let mut keys: Vec<u64> = (0..n).map(key).collect();
+    let (_, kth, _) = keys.select_nth_unstable(cap - 1);
+    let limit = *kth;
+    let mut out = Vec::with_capacity(cap);
+    for (i, p) in points.into_iter().enumerate() {
+        if key(i) <= limit && out.len() < cap {
+            out.push(p);
+        }
+    }
+    out
+}
+
+/// The points kept by the outlier filter (indices into `finite`) and the
+/// d_i (paper Eq. 5) of every kept point: every point's k-NN distance, and
+/// `d_i ≤ outlier_factor · median` keeps it.
+fn exact_density(
+    finite: &[Vec3],
+    cfg: &MembraneConfig,
+) -> Result<(Vec<usize>, Vec<f64>), MembraneError> {
+    let density = Density::new(finite, cfg.knn_k)?;
+    let d_all = density.per_point();
+    let limit = cfg.outlier_factor * density.median();
+    let keep = kept_or_all(finite.len(), cfg.outlier_factor > 0.0, |k| {
+        d_all[k] <= limit
+    });
+    let d_kept = keep.iter().map(|&k| d_all[k]).collect();
+    Ok((keep, d_kept))
+}
+
+/// The indices `0..n` that pass `keep` when `filter` is on, or all of them
+/// when it is off or fewer than [`MIN_POINTS`] would remain.
+fn kept_or_all(n: usize, filter: bool, keep: impl Fn(usize) -> bool) -> Vec<usize> {
+    if filter {
+        let kept: Vec<usize> = (0..n).filter(|&i| keep(i)).collect();
+        if kept.len() >= MIN_POINTS {
+            return kept;
+        }
+    }
+    (0..n).collect()
+}
+
+/// `membrane.density_sample`: the k-NN distances of a spread subset of
+/// the points only (δ is their median over the kept ones), and an outlier
+/// filter by voxel counts — a point is kept when the 3×3×3 voxels of edge
+/// ⅔·outlier_factor·δ around it hold more than `knn_k` points. Returns the
+/// kept indices and the d_i of the kept subset points.
+fn sampled_density(
+    finite: &[Vec3],
+    cfg: &MembraneConfig,
+) -> Result<(Vec<usize>, Vec<f64>), MembraneError> {
+    let k = cfg.knn_k.min(finite.len() - 1);
+    if k == 0 {
+        return Err(crate::density::DensityError::ZeroK.into());
+    }
+    let subset = thin((0..finite.len()).collect(), cfg.density_sample);
+    let queries: Vec<Vec3> = subset.iter().map(|&i| finite[i]).collect();
+    let d_sub = crate::density::knn_mean_distances(finite, &queries, k);
+    let delta0 = median_of(&d_sub);
+    if !(cfg.outlier_factor > 0.0 && delta0 > 0.0) {
+        return Ok(((0..finite.len()).collect(), d_sub));
+    }
+    let index = SpatialIndex::with_cell_size(finite, cfg.outlier_factor * delta0 * 2.0 / 3.0)?;
+    let inlier: Vec<bool> = finite
+        .iter()
+        .map(|p| index.count_around([p.x, p.y, p.z]) > k)
+        .collect();
+    let kept = kept_or_all(finite.len(), true, |i| inlier[i]);
+    if kept.len() == finite.len() {
+        return Ok((kept, d_sub));
+    }
+    let d_kept: Vec<f64> = subset
+        .iter()
+        .zip(&d_sub)
+        .filter(|(&i, _)| inlier[i])
+        .map(|(_, &d)| d)
+        .collect();
+    Ok((kept, if d_kept.is_empty() { d_sub } else { d_kept }))
+}

@@ -1,0 +1,198 @@
+//! Dynamic membrane adjustment (paper §III-F) as a state machine: the
+//! search depth decays, the control grid grows when the global
+//! separability stops gaining, and the evolution stops on a plateau, at an
+//! iteration cap or at the caller's deadline.
+//!
+//! After every iteration [`Schedule::next`] takes the iteration's `η_g` and
+//! returns [`Next::Continue`], [`Next::Grow`] (the grid grows by
+//! `grid_step` when the gain `Δη_g` fell below `g_min` after at least
+//! `grow_after` iterations on the grid; 8×5 → 40×25 by default) or
+//! [`Next::Stop`] (on the final grid, `|Δη_g| < plateau_eps` for
+//! `plateau_patience` iterations). Before every iteration
+//! [`Schedule::budget_stop`] checks the caps and predicts whether another
+//! iteration still ends before the deadline.
+//!
+//! The depth shrinks by `depth_decay` per iteration, but not below a floor
+//! of `depth_floor_delta`·δ, nor below what the membrane still travels
+//! (2.5× the 90th percentile of the moving samples' shifts): a fixed decay
+//! left far-off parts of the membrane outside their own search range.
+
+use super::config::MembraneConfig;
+use super::step::SampleOut;
+use super::{Budget, StopReason};
+use std::time::Instant;
+
+/// What the evolution does after an iteration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Next {
+    /// Iterate again on the same grid.
+    Continue,
+    /// Regrid to this control grid `[M, L]`, then iterate again.
+    Grow([usize; 2]),
+    /// Stop.
+    Stop(StopReason),
+}
+
+/// The schedule of one evolution (see the module docs).
+#[derive(Debug)]
+pub struct Schedule<'a> {
+    cfg: &'a MembraneConfig,
+    budget: &'a Budget,
+    depth: f64,
+    floor: f64,
+    max_grid: [usize; 2],
+    iter_on_grid: usize,
+    plateau: usize,
+    /// Duration (ms) and sample count of the last iteration, for the deadline.
+    last: (f64, usize),
+    /// η_g at the start of each iteration.
+    pub eta: Vec<f64>,
+    /// Control grid of each iteration.
+    pub grids: Vec<[usize; 2]>,
+    /// Wall-clock duration of each iteration (ms).
+    pub iteration_ms: Vec<f64>,
+    moving: Vec<f64>,
+}
+
+impl<'a> Schedule<'a> {
+    /// A schedule starting at `depth` (in input units, floored at `floor`)
+    /// on `grid`, which may grow to `grid_max` when `adaptive`.
+    pub fn new(
+        cfg: &'a MembraneConfig,
+        budget: &'a Budget,
+        depth: f64,
+        floor: f64,
+        grid: [usize; 2],
+    ) -> Self {
+        let max_grid = if cfg.adaptive {
+            [cfg.grid_max[0].max(grid[0]), cfg.grid_max[1].max(grid[1])]
+        } else {
+            grid
+        };
+        Self {
+            cfg,
+            budget,
+            depth: depth.max(floor),
+            floor,
+            max_grid,
+            iter_on_grid: 0,
+            plateau: 0,
+            last: (0.0, 1),
+            eta: Vec::new(),
+            grids: Vec::new(),
+            iteration_ms: Vec::new(),
+            moving: Vec::new(),
+        }
+    }
+
+    /// The current search depth.
+    pub fn depth(&self) -> f64 {
+        self.depth
+    }
+
+    /// The depth floor (`depth_floor_delta`·δ), the final scoring pass's depth.
+    pub fn floor(&self) -> f64 {
+        self.floor
+    }
+
+    /// Iterations run so far.
+    pub fn iterations(&self) -> usize {
+        self.eta.len()
+    }
+
+    /// Whether `grid` is the largest the schedule reaches.
+    pub fn at_max_grid(&self, grid: [usize; 2]) -> bool {
+        grid == self.max_grid
+    }
+
+    /// Why no further iteration may start, if so: an iteration cap, or a
+    /// deadline that the next iteration (predicted from the last one,
+    /// scaled to `samples`, its sample count) would pass.
+    pub fn budget_stop(&self, samples: usize) -> Option<StopReason> {
+        let it = self.iterations();
+        if it >= self.cfg.max_iterations {
+            return Some(StopReason::MaxIterations);
+        }
+        if self.budget.max_iterations.is_some_and(|n| it >= n) {
+            return Some(StopReason::IterationBudget);
+        }
+        let dl = self
+            .budget
+            .deadline
+            .filter(|_| it >= self.budget.min_iterations)?;
+        let predicted = self.last.0 * samples as f64 / self.last.1.max(1) as f64;
+        let now = Instant::now();
+        (now >= dl || (dl - now).as_secs_f64() * 1e3 < predicted).then_some(StopReason::Deadline)
+    }
+
+    /// Record an iteration on `grid` with global separability `eta_g`
+    /// (`sparse`: it searched one checkerboard half, and is compared with
+    /// the last iteration that searched the same half), decay the depth
+    /// against the travel of `outs`/`shifts`, and decide what comes next.
+    pub fn next(
+        &mut self,
+        eta_g: f64,
+        sparse: bool,
+        grid: [usize; 2],
+        outs: &[SampleOut],
+        shifts: &[f64],
+    ) -> Next {
+        self.grids.push(grid);
+        let back = if sparse { 2 } else { 1 };
+        let prev = self.eta.len().checked_sub(back).map(|k| self.eta[k]);
+        self.eta.push(eta_g);
+        self.iter_on_grid += 1;
+        let travel = self.travel(outs, shifts);
+        self.depth = (self.depth * self.cfg.depth_decay)
+            .max(travel)
+            .min(self.depth)
+            .max(self.floor);
+        let gain = prev.map_or(f64::INFINITY, |p| eta_g - p);
+        let [m, l] = grid;
+        if m < self.max_grid[0] || l < self.max_grid[1] {
+            if self.iter_on_grid >= self.cfg.grow_after.max(1) && gain < self.cfg.g_min {
+                self.iter_on_grid = 0;
+                self.plateau = 0;
+                return Next::Grow([
+                    (m + self.cfg.grid_step[0]).min(self.max_grid[0]),
+                    (l + self.cfg.grid_step[1]).min(self.max_grid[1]),
+                ]);
+            }
+            return Next::Continue;
+        }
+        if gain.abs() < self.cfg.plateau_eps {
+            self.plateau += 1;
+        } else {
+            self.plateau = 0;
+        }
+        if self.plateau >= self.cfg.plateau_patience.max(1) {
+            return Next::Stop(StopReason::Converged);
+        }
+        Next::Continue
+    }
+
+    /// Record the wall-clock time of the iteration just decided (including a
+    /// regrid) and its sample count.
+    pub fn timed(&mut self, ms: f64, samples: usize) {
+        self.last = (ms, samples);
+        self.iteration_ms.push(ms);
+    }
+
+    /// What the membrane still travels: 2.5× the 90th percentile of the
+    /// moving samples' |shift| (0 when none moves).
+    fn travel(&mut self, outs: &[SampleOut], shifts: &[f64]) -> f64 {
+        self.moving.clear();
+        self.moving.extend(
+            outs.iter()
+                .zip(shifts)
+                .filter(|(o, _)| o.state.moves())
+                .map(|(_, s)| s.abs()),
+        );
+        if self.moving.is_empty() {
+            return 0.0;
+        }
+        let k = (self.moving.len() * 9 / 10).min(self.moving.len() - 1);
+        let (_, q, _) = self.moving.select_nth_unstable_by(k, f64::total_cmp);
+        2.5 * *q
+    }
+}
