@@ -63,11 +63,29 @@ pub enum MetricsError {
     },
 }
 
+/// Largest `metrics.samples`: 10⁷ samples per mesh need about 1.5 GB
+/// (positions, normals, the k-d tree, the distances) for the two meshes;
+/// 10⁹ aborted on the allocation before.
+pub const MAX_SAMPLES: usize = 10_000_000;
+
+/// Reject `metrics.samples` outside `1..=MAX_SAMPLES` while the
+/// configuration is read, naming the key.
+fn samples_in_range<'de, D: serde::Deserializer<'de>>(d: D) -> Result<usize, D::Error> {
+    let n = usize::deserialize(d)?;
+    if n == 0 || n > MAX_SAMPLES {
+        return Err(serde::de::Error::custom(format!(
+            "metrics.samples = {n} is outside 1..={MAX_SAMPLES}"
+        )));
+    }
+    Ok(n)
+}
+
 /// The `metrics` configuration (used by `sepmem eval` and the benchmark).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MetricsConfig {
-    /// Samples per mesh.
+    /// Samples per mesh, 1 to [`MAX_SAMPLES`].
+    #[serde(deserialize_with = "samples_in_range")]
     pub samples: usize,
     /// F-score threshold τ in the normalised frame.
     pub tau: f64,
@@ -321,10 +339,10 @@ pub fn evaluate(
     gt: &TriMesh,
     cfg: &MetricsConfig,
 ) -> Result<Metrics, MetricsError> {
-    if cfg.samples == 0 {
+    if cfg.samples == 0 || cfg.samples > MAX_SAMPLES {
         return Err(MetricsError::BadParameter {
             what: "samples",
-            value: 0.0,
+            value: cfg.samples as f64,
         });
     }
     check_indices(pred, "pred")?;

@@ -982,6 +982,7 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
         }
         .into());
     }
+    crate::cloud::check_spread(&points)?;
     // δ: the median d_i for a single view, where the spacing varies with
     // depth and incidence; delta_scale × the delta_quantile of d_i for a
     // whole object (default 1.3 × the lower quartile, which measures the
