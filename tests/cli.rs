@@ -318,18 +318,26 @@ fn replay_is_deterministic_and_applies_the_deadlines_only_with_realtime() {
 fn printing_into_a_closed_pipe_ends_quietly() {
     use std::os::unix::process::ExitStatusExt;
     for args in [vec!["config"], vec!["config", "--annotated"]] {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_sepmem"))
+        // A socket pair whose reading end is closed before the child starts:
+        // its first write finds the peer gone, whatever the scheduling.
+        let (ours, theirs) = std::os::unix::net::UnixStream::pair().unwrap();
+        drop(ours);
+        let o = Command::new(env!("CARGO_BIN_EXE_sepmem"))
             .args(&args)
-            .stdout(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::from(std::os::fd::OwnedFd::from(
+                theirs,
+            )))
             .stderr(std::process::Stdio::piped())
-            .spawn()
+            .output()
             .unwrap();
-        // Close the reading end before the child has printed anything.
-        drop(child.stdout.take());
-        let o = child.wait_with_output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!err.contains("panicked"), "{args:?}: {err}");
-        assert_eq!(o.status.signal(), Some(libc::SIGPIPE), "{args:?}: {:?} {err}", o.status);
+        assert_eq!(
+            o.status.signal(),
+            Some(libc::SIGPIPE),
+            "{args:?}: {:?} {err}",
+            o.status
+        );
     }
 }
 
@@ -346,7 +354,11 @@ fn an_unwritable_output_is_reported_before_the_work() {
         let o = sepmem(&args);
         assert!(!o.status.success(), "{}", text(&o));
         let err = String::from_utf8_lossy(&o.stderr);
-        assert!(err.contains("mesh.ply") && err.contains("before"), "{}", text(&o));
+        assert!(
+            err.contains("mesh.ply") && err.contains("before"),
+            "{}",
+            text(&o)
+        );
         assert!(o.stdout.is_empty(), "nothing was computed: {}", text(&o));
     }
 }
@@ -366,7 +378,11 @@ fn too_many_metric_samples_is_a_configuration_error() {
     ]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("metrics.samples") && err.contains("10000000"), "{}", text(&o));
+    assert!(
+        err.contains("metrics.samples") && err.contains("10000000"),
+        "{}",
+        text(&o)
+    );
 }
 
 /// Issue 22 (10): when no frame succeeds the replay summary says so (it
@@ -377,7 +393,11 @@ fn replay_says_when_no_frame_succeeded_and_when_a_bag_is_cut() {
     let o = sepmem(&["replay", p(&bag), "--set", "pipeline.min_points=100000000"]);
     assert!(o.status.success(), "{}", text(&o));
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(out.contains("0 frames ok") && out.contains("no frame succeeded"), "{}", text(&o));
+    assert!(
+        out.contains("0 frames ok") && out.contains("no frame succeeded"),
+        "{}",
+        text(&o)
+    );
     assert!(!out.contains("NaN"), "{}", text(&o));
     let dir = tempfile::tempdir().unwrap();
     let cut = dir.path().join("cut.mcap");
@@ -386,6 +406,14 @@ fn replay_says_when_no_frame_succeeded_and_when_a_bag_is_cut() {
     let o = sepmem(&["replay", p(&cut)]);
     assert!(!o.status.success(), "{}", text(&o));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("truncated") && err.contains("cut.mcap"), "{}", text(&o));
-    assert!(err.contains(&format!("byte {}", full.len() * 2 / 3)), "{}", text(&o));
+    assert!(
+        err.contains("truncated") && err.contains("cut.mcap"),
+        "{}",
+        text(&o)
+    );
+    assert!(
+        err.contains(&format!("byte {}", full.len() * 2 / 3)),
+        "{}",
+        text(&o)
+    );
 }

@@ -55,7 +55,15 @@ impl Rng {
 }
 
 const BYTES: [u8; 10] = [0, 0xff, 0x7f, 0x80, b'0', b'9', b'\n', b' ', b'-', b'.'];
-const WORDS: [u32; 7] = [0, 1, u32::MAX, 0x7fff_ffff, 0x8000_0000, 4_000_000_000, 65_536];
+const WORDS: [u32; 7] = [
+    0,
+    1,
+    u32::MAX,
+    0x7fff_ffff,
+    0x8000_0000,
+    4_000_000_000,
+    65_536,
+];
 const NUMBERS: [&str; 8] = [
     "0",
     "-1",
@@ -174,7 +182,12 @@ fn replay_corpus_timing() {
             n += 1;
             if s > limit {
                 slow += 1;
-                println!("slow {target}: {} ({} bytes, {:.1} ms)", p.display(), data.len(), s * 1e3);
+                println!(
+                    "slow {target}: {} ({} bytes, {:.1} ms)",
+                    p.display(),
+                    data.len(),
+                    s * 1e3
+                );
             }
             worst = worst.max(s * 1e6 / data.len().max(1) as f64);
         }
@@ -236,7 +249,8 @@ mod seeds {
     fn pointcloud2() -> Seeds {
         let enc = |m: &PointCloud2| sepmem::wire::encode(m).unwrap();
         let plain = sepmem::wire::pointcloud2::encode_pointcloud2(&cloud(6), Header::default());
-        let mut organised = sepmem::wire::pointcloud2::encode_pointcloud2(&cloud(4), Header::default());
+        let mut organised =
+            sepmem::wire::pointcloud2::encode_pointcloud2(&cloud(4), Header::default());
         organised.height = 2;
         organised.width = 2;
         organised.row_step = 2 * organised.point_step;
@@ -301,7 +315,10 @@ mod seeds {
     fn text() -> (Seeds, Seeds) {
         let xyz = vec![
             ("plain.xyz", b"# c\n1 2 3 9\n4,5,6,8\nnan 0 0 7\n".to_vec()),
-            ("header.xyz", b"x y z red green blue intensity\n0 0 0 255 0 51 0.5\n1 1 1 0 9 0 1\n".to_vec()),
+            (
+                "header.xyz",
+                b"x y z red green blue intensity\n0 0 0 255 0 51 0.5\n1 1 1 0 9 0 1\n".to_vec(),
+            ),
             ("semicolon.xyz", b"0.5;1.5;2.5\n-1;-2;-3\n".to_vec()),
         ];
         let obj = vec![
@@ -324,7 +341,11 @@ mod seeds {
         w.finish().unwrap();
         let full = std::fs::read(&path).unwrap();
         let cut = full[..full.len() / 2].to_vec();
-        vec![("bag.mcap", full), ("cut.mcap", cut), ("magic.mcap", b"\x89MCAP0\r\n".to_vec())]
+        vec![
+            ("bag.mcap", full),
+            ("cut.mcap", cut),
+            ("magic.mcap", b"\x89MCAP0\r\n".to_vec()),
+        ]
     }
 
     pub fn all() -> Vec<(&'static str, Seeds)> {

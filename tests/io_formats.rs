@@ -140,7 +140,8 @@ fn every_shared_dataset_file_loads_with_the_documented_counts() {
                 if ext == "obj" {
                     assert_eq!(cloud.len(), v, "{n}");
                     // tobj reads float32; the cloud reader keeps the file's f64.
-                    let key = |p: &sepmem::cloud::Vec3| [p.x, p.y, p.z].map(|c| (c as f32).to_bits());
+                    let key =
+                        |p: &sepmem::cloud::Vec3| [p.x, p.y, p.z].map(|c| (c as f32).to_bits());
                     let mut used: Vec<_> = m.mesh.vertices.iter().map(key).collect();
                     let all: std::collections::HashSet<_> = cloud.iter().map(key).collect();
                     used.retain(|k| !all.contains(k));

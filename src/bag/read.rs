@@ -499,7 +499,10 @@ mod tests {
             let f = dir.path().join(format!("cut{cut}.mcap"));
             std::fs::write(&f, &full[..cut]).unwrap();
             let e = Bag::open(&f).unwrap_err().to_string();
-            assert!(e.contains("truncated") || e.contains("incomplete"), "{cut}: {e}");
+            assert!(
+                e.contains("truncated") || e.contains("incomplete"),
+                "{cut}: {e}"
+            );
             assert!(e.contains(&format!("{cut}")), "{cut}: {e}");
             assert!(e.contains(&format!("cut{cut}.mcap")), "{e}");
         }

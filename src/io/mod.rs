@@ -437,7 +437,10 @@ mod tests {
         assert!(!ok.exists(), "the probe file is removed");
         let missing = dir.path().join("no/such/dir/m.obj");
         let e = check_output(&missing, OutputKind::Mesh).unwrap_err();
-        assert!(matches!(e, IoError::Io { .. }) && e.to_string().contains("m.obj"), "{e}");
+        assert!(
+            matches!(e, IoError::Io { .. }) && e.to_string().contains("m.obj"),
+            "{e}"
+        );
         let e = check_output(dir.path().join("m.pcd"), OutputKind::Mesh).unwrap_err();
         assert!(matches!(e, IoError::UnknownFormat { .. }), "{e}");
         check_output(dir.path().join("c.pcd"), OutputKind::Cloud).unwrap();

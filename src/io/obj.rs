@@ -132,7 +132,8 @@ pub fn parse_cloud(bytes: &[u8], path: &Path) -> Result<LoadedCloud, IoError> {
             );
         }
         let coloured = values.len() == 6;
-        if !matches!(values.len(), 3 | 4 | 6) || *first_coloured.get_or_insert(coloured) != coloured {
+        if !matches!(values.len(), 3 | 4 | 6) || *first_coloured.get_or_insert(coloured) != coloured
+        {
             return Err(bad(format!(
                 "vertex with {} values (x y z [w] or x y z r g b on every line)",
                 values.len()

@@ -145,28 +145,26 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, IoError> {
     }
     let nf = fields.len();
     let counts = counts.unwrap_or_else(|| vec![1; nf]);
-    if data != Data::Ascii || !sizes.is_empty() || !kinds.is_empty() {
-        for (what, n) in [
-            ("SIZE", sizes.len()),
-            ("TYPE", kinds.len()),
-            ("COUNT", counts.len()),
-        ] {
-            if n != nf {
-                return Err(IoError::CountMismatch {
-                    path: path.to_path_buf(),
-                    what: format!("{what} entries for the {nf} FIELDS"),
-                    expected: nf,
-                    found: n,
-                });
-            }
-        }
-    }
-    // Ascii files may omit SIZE/TYPE: default to float.
-    if sizes.is_empty() {
+    // Ascii files may omit both SIZE and TYPE: default to float.
+    if data == Data::Ascii && sizes.is_empty() && kinds.is_empty() {
         sizes = vec![4; nf];
-    }
-    if kinds.is_empty() {
         kinds = vec![b'F'; nf];
+    }
+    // Every list must then match FIELDS (an ascii header with a short COUNT
+    // and no SIZE/TYPE indexed past its end: found by the fuzz pass).
+    for (what, n) in [
+        ("SIZE", sizes.len()),
+        ("TYPE", kinds.len()),
+        ("COUNT", counts.len()),
+    ] {
+        if n != nf {
+            return Err(IoError::CountMismatch {
+                path: path.to_path_buf(),
+                what: format!("{what} entries for the {nf} FIELDS"),
+                expected: nf,
+                found: n,
+            });
+        }
     }
     let mut out = Vec::with_capacity(nf);
     for i in 0..nf {
@@ -752,6 +750,30 @@ mod tests {
     }
 
     #[test]
+    fn a_short_count_list_without_size_and_type_is_a_count_mismatch() {
+        // The fuzz pass's panic (index out of bounds), minimised.
+        let b = b"FIELDS x y z w\nCOUNT 1 1 1\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2 3 4\n";
+        let e = parse_cloud(b, p()).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                IoError::CountMismatch {
+                    expected: 4,
+                    found: 3,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        // Without SIZE, TYPE and COUNT an ascii file is still read as floats.
+        let b = b"FIELDS x y z w\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2 3 4\n";
+        assert_eq!(
+            parse_cloud(b, p()).unwrap().cloud.attribute("w").unwrap(),
+            &[4.0]
+        );
+    }
+
+    #[test]
     fn forty_thousand_fields_are_read_in_linear_time() {
         // 13 s before (a linear name search per field); one binary point of 40 k U 1 fields.
         let n = 40_000;
@@ -769,7 +791,10 @@ mod tests {
         b.extend((0..n).map(|k| (k % 251) as u8));
         let c = parse_cloud(&b, p()).unwrap();
         assert_eq!(c.cloud.attributes.len(), n);
-        assert_eq!(c.cloud.attribute("f39999").unwrap(), &[(39_999 % 251) as f32]);
+        assert_eq!(
+            c.cloud.attribute("f39999").unwrap(),
+            &[(39_999 % 251) as f32]
+        );
     }
 
     #[test]

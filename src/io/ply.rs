@@ -654,7 +654,8 @@ const F32_RELATIVE_TOLERANCE: f64 = 1e-6;
 /// True when storing `points` as float32 would move a coordinate by more
 /// than [`F32_RELATIVE_TOLERANCE`] × the diagonal of their bounding box.
 fn needs_f64(points: &[Vec3]) -> bool {
-    let bb = crate::cloud::Aabb::from_points(points.iter().filter(|p| p.iter().all(|c| c.is_finite())));
+    let bb =
+        crate::cloud::Aabb::from_points(points.iter().filter(|p| p.iter().all(|c| c.is_finite())));
     let tol = F32_RELATIVE_TOLERANCE * bb.diagonal();
     points
         .iter()
@@ -724,7 +725,10 @@ pub fn encode_mesh(
     );
     let wide = needs_f64(&mesh.vertices);
     let mut h = String::from("ply\nformat binary_little_endian 1.0\ncomment written by sepmem\n");
-    h.push_str(&format!("element vertex {nv}\n{}", position_properties(wide)));
+    h.push_str(&format!(
+        "element vertex {nv}\n{}",
+        position_properties(wide)
+    ));
     for (name, _) in &mesh.vertex_scalars {
         h.push_str(&format!("property float {}\n", sanitize(name)));
     }
@@ -796,7 +800,10 @@ pub fn encode_cloud(cloud: &PointCloud, path: &Path) -> Result<Vec<u8>, IoError>
     let (rgb, others) = cloud.rgb_and_other_channels();
     let wide = needs_f64(&cloud.points);
     let mut h = String::from("ply\nformat binary_little_endian 1.0\ncomment written by sepmem\n");
-    h.push_str(&format!("element vertex {n}\n{}", position_properties(wide)));
+    h.push_str(&format!(
+        "element vertex {n}\n{}",
+        position_properties(wide)
+    ));
     if rgb.is_some() {
         h.push_str("property uchar red\nproperty uchar green\nproperty uchar blue\n");
     }
@@ -944,7 +951,10 @@ mod tests {
         b.extend((0..n).map(|k| (k % 251) as u8));
         let c = parse_cloud(&b, p()).unwrap();
         assert_eq!(c.cloud.attributes.len(), n);
-        assert_eq!(c.cloud.attribute("p39999").unwrap(), &[(39_999 % 251) as f32]);
+        assert_eq!(
+            c.cloud.attribute("p39999").unwrap(),
+            &[(39_999 % 251) as f32]
+        );
     }
 
     #[test]

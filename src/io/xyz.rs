@@ -169,7 +169,10 @@ mod tests {
         let c = parse_cloud(text.as_bytes(), Path::new("w.xyz")).unwrap();
         assert_eq!(c.cloud.len(), 2);
         assert_eq!(c.cloud.attributes.len(), cols - 3);
-        assert_eq!(c.cloud.attribute("col79999").unwrap(), &[(79_999 % 97) as f32; 2]);
+        assert_eq!(
+            c.cloud.attribute("col79999").unwrap(),
+            &[(79_999 % 97) as f32; 2]
+        );
     }
 
     #[test]

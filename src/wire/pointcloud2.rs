@@ -699,16 +699,18 @@ mod tests {
         ));
         // More channels than point_step bytes: only overlapping fields can do that.
         let mut m = poisoned(8);
-        m.fields.push(PointField {
-            name: "j".into(),
-            offset: 12,
-            datatype: PointField::INT8,
-            count: 8,
-        });
+        for name in ["j", "k"] {
+            m.fields.push(PointField {
+                name: name.into(),
+                offset: 12,
+                datatype: PointField::INT8,
+                count: 8,
+            });
+        }
         assert_eq!(
             decode_pointcloud2(&m, &WireConfig::default()),
             Err(PointCloud2Error::TooManyChannels {
-                channels: 16,
+                channels: 24,
                 max: 20
             })
         );
@@ -739,7 +741,10 @@ mod tests {
         };
         let d = decode_pointcloud2(&m, &WireConfig::default()).unwrap();
         assert_eq!(d.cloud.attributes.len(), n as usize);
-        assert_eq!(d.cloud.attribute("f39999").unwrap(), &[(39_999 % 251) as f32]);
+        assert_eq!(
+            d.cloud.attribute("f39999").unwrap(),
+            &[(39_999 % 251) as f32]
+        );
     }
 
     #[test]
