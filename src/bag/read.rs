@@ -134,6 +134,44 @@ fn mcap_truncation(buf: &[u8]) -> Option<String> {
     }
 }
 
+/// Largest uncompressed chunk accepted (rosbag2 writes 4 MiB chunks by
+/// default). The mcap crate allocates a chunk's declared uncompressed size
+/// before decompressing: a mutated size of 3.4·10¹⁸ aborted the process
+/// (found by the short fuzz pass).
+const MAX_CHUNK_BYTES: u64 = 1 << 30;
+
+/// Walk the top-level records and reject a chunk (opcode 0x06) that
+/// declares more than [`MAX_CHUNK_BYTES`] uncompressed; the walk stops at a
+/// truncation, which the mcap crate reports. Linear in the record count.
+fn check_chunks(path: &Path, buf: &[u8]) -> Result<(), BagError> {
+    let mut pos = 8usize;
+    while let Some(head) = buf.get(pos..pos + 9) {
+        let mut len = [0u8; 8];
+        len.copy_from_slice(&head[1..]);
+        let len = u64::from_le_bytes(len);
+        if head[0] == 0x06 {
+            if let Some(size) = buf.get(pos + 9 + 16..pos + 9 + 24) {
+                let mut b = [0u8; 8];
+                b.copy_from_slice(size);
+                let size = u64::from_le_bytes(b);
+                if size > MAX_CHUNK_BYTES {
+                    return Err(BagError::Mcap {
+                        path: path.to_path_buf(),
+                        message: format!(
+                            "the chunk at byte {pos} declares {size} uncompressed bytes, more than {MAX_CHUNK_BYTES}"
+                        ),
+                    });
+                }
+            }
+        }
+        match usize::try_from(len).ok().and_then(|l| (pos + 9).checked_add(l)) {
+            Some(next) if next <= buf.len() => pos = next,
+            _ => break,
+        }
+    }
+    Ok(())
+}
+
 fn mcap_err<'a>(path: &'a Path, buf: &'a [u8]) -> impl Fn(mcap::McapError) -> BagError + 'a {
     move |e| BagError::Mcap {
         path: path.to_path_buf(),
@@ -308,6 +346,7 @@ fn mcap_topics_in(
     buf: &[u8],
     skipped: &mut Vec<String>,
 ) -> Result<Vec<TopicInfo>, BagError> {
+    check_chunks(path, buf)?;
     let mut counts: BTreeMap<u16, u64> = BTreeMap::new();
     let mut channels: BTreeMap<u16, ChannelInfo> = BTreeMap::new();
     match mcap::Summary::read(buf).map_err(mcap_err(path, buf))? {
@@ -369,6 +408,7 @@ fn read_mcap_in(
     wanted: &dyn Fn(&str) -> bool,
     out: &mut Vec<BagMessage>,
 ) -> Result<(), BagError> {
+    check_chunks(path, buf)?;
     for m in mcap::MessageStream::new(buf).map_err(mcap_err(path, buf))? {
         let m = m.map_err(mcap_err(path, buf))?;
         if m.channel.message_encoding != "cdr" || !wanted(&m.channel.topic) {
@@ -509,6 +549,17 @@ mod tests {
         // The cut in the middle names the record it falls in.
         let e = mcap_truncation(&full[..full.len() / 2]).unwrap();
         assert!(e.contains("inside the record (opcode 0x"), "{e}");
+        // A chunk that lies about its uncompressed size is an error, not an
+        // abort on the allocation (the fuzz pass's finding, rebuilt here).
+        let mut pos = 8;
+        while full[pos] != 0x06 {
+            let len = u64::from_le_bytes(full[pos + 1..pos + 9].try_into().unwrap());
+            pos += 9 + len as usize;
+        }
+        let mut lie = full.clone();
+        lie[pos + 25..pos + 33].copy_from_slice(&3_467_835_911_653_498_921u64.to_le_bytes());
+        let e = parse_mcap(Path::new("lie.mcap"), &lie).unwrap_err().to_string();
+        assert!(e.contains("uncompressed bytes"), "{e}");
         // Not an MCAP at all: no truncation story.
         assert_eq!(mcap_truncation(b"PAR1 something else"), None);
     }
