@@ -9,8 +9,15 @@
 //! so that the weighted separability (paper Eq. 9) can pick them by name.
 //! Colour is stored as the channels `r`, `g`, `b` in `[0, 1]`; [`PointCloud::luma`]
 //! derives the Rec. 601 luma from them.
+//!
+//! A cloud can carry a closed surface only if it spreads in three
+//! dimensions. [`check_spread`] measures that by principal component
+//! analysis (the eigenvalues of the covariance matrix), independent of the
+//! orientation: the axis-aligned box alone let a plane tilted by 45° and
+//! 2,000 collinear points along a diagonal through (a 4.7 m³ "watertight"
+//! mesh with η_g 0, exit 0).
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use thiserror::Error;
 
 /// 3-vector of `f64` used for every position and direction in sepmem.
@@ -36,6 +43,14 @@ pub enum CloudError {
         /// Bounding-box edge lengths.
         extent: [f64; 3],
     },
+    /// The points lie on (nearly) a plane or a line in some orientation:
+    /// the smallest principal spread is below [`MIN_RELATIVE_SPREAD`] of the
+    /// largest.
+    #[error("point cloud is degenerate: it lies on a plane or a line (standard deviations along its principal axes {spread:?})")]
+    Flat {
+        /// Standard deviations along the principal axes, largest first.
+        spread: [f64; 3],
+    },
     /// An attribute channel does not have one value per point.
     #[error("attribute `{name}` has {got} values for {points} points")]
     AttributeLength {
@@ -46,6 +61,52 @@ pub enum CloudError {
         /// Number of points.
         points: usize,
     },
+}
+
+/// Smallest accepted ratio of the smallest to the largest standard
+/// deviation along the principal axes (far above the ~10⁻⁸ floor of the
+/// eigen-solver's rounding, far below a thin real object: a sheet 0.1 mm
+/// thick and 0.3 m wide has ~3·10⁻⁴).
+pub const MIN_RELATIVE_SPREAD: f64 = 1e-5;
+
+/// Standard deviations of `points` along their principal axes, largest
+/// first (square roots of the covariance eigenvalues); zeros for fewer than
+/// two points.
+pub fn principal_spread(points: &[Vec3]) -> [f64; 3] {
+    if points.len() < 2 {
+        return [0.0; 3];
+    }
+    let n = points.len() as f64;
+    let mean: Vec3 = points.iter().sum::<Vec3>() / n;
+    let mut cov = Matrix3::zeros();
+    for p in points {
+        let d = p - mean;
+        cov += d * d.transpose();
+    }
+    cov /= n;
+    let mut s = SymmetricEigen::new(cov)
+        .eigenvalues
+        .map(|l| l.max(0.0).sqrt());
+    s.as_mut_slice().sort_by(|a, b| b.total_cmp(a));
+    [s[0], s[1], s[2]]
+}
+
+/// Check that `points` spread in three dimensions, in any orientation.
+///
+/// # Errors
+/// [`CloudError::Flat`] when the smallest principal spread is below
+/// [`MIN_RELATIVE_SPREAD`] times the largest (a plane, a line, a point, or a
+/// spread that is not finite).
+pub fn check_spread(points: &[Vec3]) -> Result<(), CloudError> {
+    let spread = principal_spread(points);
+    let ok = spread.iter().all(|s| s.is_finite())
+        && spread[0] > 0.0
+        && spread[2] >= MIN_RELATIVE_SPREAD * spread[0];
+    if ok {
+        Ok(())
+    } else {
+        Err(CloudError::Flat { spread })
+    }
 }
 
 /// A named scalar channel, one value per point.
@@ -295,7 +356,9 @@ impl PointCloud {
     /// Check that the cloud can carry a surface: enough points and a 3D extent.
     ///
     /// # Errors
-    /// [`CloudError::Empty`], [`CloudError::TooFewPoints`] or [`CloudError::Degenerate`].
+    /// [`CloudError::Empty`], [`CloudError::TooFewPoints`],
+    /// [`CloudError::Degenerate`] (flat bounding box) or [`CloudError::Flat`]
+    /// (flat in some other orientation, see [`check_spread`]).
     pub fn validate(&self, min_points: usize) -> Result<Aabb, CloudError> {
         if self.points.is_empty() {
             return Err(CloudError::Empty);
@@ -323,6 +386,7 @@ impl PointCloud {
                 extent: [e.x, e.y, e.z],
             });
         }
+        check_spread(&self.points)?;
         Ok(bb)
     }
 }
@@ -367,6 +431,51 @@ mod tests {
             planar.validate(4),
             Err(CloudError::Degenerate { .. })
         ));
+    }
+
+    /// Rotation taking the z axis to the direction (1, 1, 1)/√3 (45° tilts about two axes).
+    fn tilt(p: Vec3) -> Vec3 {
+        let r = nalgebra::Rotation3::rotation_between(&Vec3::z(), &Vec3::new(1.0, 1.0, 1.0))
+            .unwrap_or_else(nalgebra::Rotation3::identity);
+        r * p
+    }
+
+    #[test]
+    fn tilted_plane_and_diagonal_line_are_rejected() {
+        let plane: Vec<Vec3> = (0..2000)
+            .map(|i| {
+                tilt(Vec3::new(
+                    (i % 40) as f64 * 0.01,
+                    (i / 40) as f64 * 0.01,
+                    0.0,
+                ))
+            })
+            .collect();
+        // The box of the tilted plane is not flat: the old check let it through.
+        let e = Aabb::from_points(&plane).extent();
+        assert!(e.min() > 0.1 * e.max(), "{e}");
+        let err = PointCloud::from_points(plane).validate(4).unwrap_err();
+        assert!(matches!(err, CloudError::Flat { .. }), "{err}");
+        let line: Vec<Vec3> = (0..2000)
+            .map(|i| Vec3::new(1.0, 2.0, 3.0) * (i as f64 * 1e-3))
+            .collect();
+        let err = PointCloud::from_points(line).validate(4).unwrap_err();
+        assert!(
+            matches!(err, CloudError::Flat { spread } if spread[1] < 1e-6 * spread[0]),
+            "{err}"
+        );
+        // A tilted box of points (a thin but real slab) passes.
+        let slab: Vec<Vec3> = (0..2000)
+            .map(|i| {
+                let (a, b, c) = (i % 20, (i / 20) % 20, i / 400);
+                tilt(Vec3::new(
+                    a as f64 * 0.05,
+                    b as f64 * 0.05,
+                    c as f64 * 0.002,
+                ))
+            })
+            .collect();
+        assert!(PointCloud::from_points(slab).validate(4).is_ok());
     }
 
     #[test]

@@ -188,8 +188,32 @@ enum Command {
     },
 }
 
+/// Restore the default SIGPIPE action (end quietly, as `cat` or `grep` do)
+/// for the subcommands that read and write files and print: Rust ignores
+/// SIGPIPE, so `sepmem config | head` panicked in `println!` on the closed
+/// pipe. The networked subcommands (node, play, demo, bench-node) keep it
+/// ignored: a peer closing a unix socket must not end the node.
+#[cfg(unix)]
+#[allow(unsafe_code)]
+fn end_quietly_on_broken_pipe() {
+    // SAFETY: installs the default action, no handler code; called once at
+    // the start of main, before any thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
+#[cfg(not(unix))]
+fn end_quietly_on_broken_pipe() {}
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
+    if !matches!(
+        cli.command,
+        Command::Node { .. } | Command::Play { .. } | Command::Demo { .. } | Command::BenchNode(_)
+    ) {
+        end_quietly_on_broken_pipe();
+    }
     tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::new(&cli.log))
         .with_writer(std::io::stderr)

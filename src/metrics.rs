@@ -62,11 +62,29 @@ pub enum MetricsError {
     },
 }
 
+/// Largest `metrics.samples`: 10⁷ samples per mesh need about 1.5 GB
+/// (positions, normals, the k-d tree, the distances) for the two meshes;
+/// 10⁹ aborted on the allocation before.
+pub const MAX_SAMPLES: usize = 10_000_000;
+
+/// Reject `metrics.samples` outside `1..=MAX_SAMPLES` while the
+/// configuration is read, naming the key.
+fn samples_in_range<'de, D: serde::Deserializer<'de>>(d: D) -> Result<usize, D::Error> {
+    let n = usize::deserialize(d)?;
+    if n == 0 || n > MAX_SAMPLES {
+        return Err(serde::de::Error::custom(format!(
+            "metrics.samples = {n} is outside 1..={MAX_SAMPLES}"
+        )));
+    }
+    Ok(n)
+}
+
 /// The `metrics` configuration (used by `sepmem eval` and the benchmark).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MetricsConfig {
-    /// Samples per mesh.
+    /// Samples per mesh, 1 to [`MAX_SAMPLES`].
+    #[serde(deserialize_with = "samples_in_range")]
     pub samples: usize,
     /// F-score threshold τ in the normalised frame.
     pub tau: f64,
@@ -307,10 +325,10 @@ pub fn evaluate(
     gt: &TriMesh,
     cfg: &MetricsConfig,
 ) -> Result<Metrics, MetricsError> {
-    if cfg.samples == 0 {
+    if cfg.samples == 0 || cfg.samples > MAX_SAMPLES {
         return Err(MetricsError::BadParameter {
             what: "samples",
-            value: 0.0,
+            value: cfg.samples as f64,
         });
     }
     check_indices(pred, "pred")?;
@@ -389,6 +407,50 @@ mod tests {
             tau: 0.01,
             seed: 7,
         }
+    }
+
+    #[test]
+    fn far_apart_meshes_score_their_true_distance() {
+        // Issue 22 (9): a sphere against itself offset by 10 diameters (10 s
+        // before), and one triangle against a sphere (36 s before). The mean
+        // distance from a sphere of radius r to the centre of another at
+        // distance D is D + r²/(3D) (shell theorem), so accuracy is that
+        // minus r in the normalised frame (r = 0.5, D = 10).
+        let gt = uv_sphere(Vec3::zeros(), 1.0, 48, 96);
+        let pred = uv_sphere(Vec3::new(20.0, 0.0, 0.0), 1.0, 48, 96);
+        let m = evaluate(&pred, &gt, &cfg(20_000)).unwrap();
+        let want = 10.0 + 0.25 / 30.0 - 0.5;
+        assert!((m.accuracy - want).abs() < 0.01, "{} vs {want}", m.accuracy);
+        assert!((m.completeness - want).abs() < 0.01, "{}", m.completeness);
+        assert_eq!(m.fscore, 0.0);
+        let tri = TriMesh {
+            vertices: vec![
+                Vec3::new(5.0, 0.0, 0.0),
+                Vec3::new(5.0, 1.0, 0.0),
+                Vec3::new(5.0, 0.0, 1.0),
+            ],
+            triangles: vec![[0, 1, 2]],
+            vertex_scalars: Vec::new(),
+        };
+        let m = evaluate(&tri, &gt, &cfg(20_000)).unwrap();
+        // Every triangle point is at least 2 (radius 0.5, plane x = 2.5) away.
+        assert!(m.accuracy > 2.0 && m.completeness > 2.0, "{m:?}");
+        let m = evaluate(&gt, &gt, &cfg(0)).unwrap_err();
+        assert!(matches!(
+            m,
+            MetricsError::BadParameter {
+                what: "samples",
+                ..
+            }
+        ));
+        let too_many = evaluate(&gt, &gt, &cfg(MAX_SAMPLES + 1)).unwrap_err();
+        assert!(matches!(
+            too_many,
+            MetricsError::BadParameter {
+                what: "samples",
+                ..
+            }
+        ));
     }
 
     #[test]

@@ -310,3 +310,110 @@ fn replay_is_deterministic_and_applies_the_deadlines_only_with_realtime() {
         assert_eq!(r[5], "0", "{r:?}");
     }
 }
+
+/// Issue 22 (10): printing into a closed pipe (`sepmem config | head`) ends
+/// the process by SIGPIPE, as `cat` does, instead of a panic (exit 101).
+#[cfg(unix)]
+#[test]
+fn printing_into_a_closed_pipe_ends_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    for args in [vec!["config"], vec!["config", "--annotated"]] {
+        // A socket pair whose reading end is closed before the child starts:
+        // its first write finds the peer gone, whatever the scheduling.
+        let (ours, theirs) = std::os::unix::net::UnixStream::pair().unwrap();
+        drop(ours);
+        let o = Command::new(env!("CARGO_BIN_EXE_sepmem"))
+            .args(&args)
+            .stdout(std::process::Stdio::from(std::os::fd::OwnedFd::from(
+                theirs,
+            )))
+            .stderr(std::process::Stdio::piped())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert_eq!(
+            o.status.signal(),
+            Some(libc::SIGPIPE),
+            "{args:?}: {:?} {err}",
+            o.status
+        );
+    }
+}
+
+/// Issue 22 (10): an unwritable output path fails before the reconstruction.
+#[test]
+fn an_unwritable_output_is_reported_before_the_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scan, _) = ellipsoid_scan(dir.path(), 1.0, Vec3::zeros());
+    let out = dir.path().join("missing/dir/mesh.ply");
+    for args in [
+        vec!["reconstruct", p(&scan), "-o", p(&out)],
+        vec!["filter", p(&scan), "-o", p(&out)],
+    ] {
+        let o = sepmem(&args);
+        assert!(!o.status.success(), "{}", text(&o));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains("mesh.ply") && err.contains("before"),
+            "{}",
+            text(&o)
+        );
+        assert!(o.stdout.is_empty(), "nothing was computed: {}", text(&o));
+    }
+}
+
+/// Issue 22 (9): an absurd sample count is a configuration error naming the
+/// key and its maximum (it aborted on the allocation before).
+#[test]
+fn too_many_metric_samples_is_a_configuration_error() {
+    let o = sepmem(&[
+        "eval",
+        "--pred",
+        "p.ply",
+        "--gt",
+        "g.ply",
+        "--set",
+        "metrics.samples=1000000000",
+    ]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("metrics.samples") && err.contains("10000000"),
+        "{}",
+        text(&o)
+    );
+}
+
+/// Issue 22 (10): when no frame succeeds the replay summary says so (it
+/// printed "p50 NaN"); a truncated bag says it is truncated and where.
+#[test]
+fn replay_says_when_no_frame_succeeded_and_when_a_bag_is_cut() {
+    let bag = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/bags/synth_ellipsoid.mcap");
+    let o = sepmem(&["replay", p(&bag), "--set", "pipeline.min_points=100000000"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("0 frames ok") && out.contains("no frame succeeded"),
+        "{}",
+        text(&o)
+    );
+    assert!(!out.contains("NaN"), "{}", text(&o));
+    let dir = tempfile::tempdir().unwrap();
+    let cut = dir.path().join("cut.mcap");
+    let full = std::fs::read(&bag).unwrap();
+    std::fs::write(&cut, &full[..full.len() * 2 / 3]).unwrap();
+    let o = sepmem(&["replay", p(&cut)]);
+    assert!(!o.status.success(), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("truncated") && err.contains("cut.mcap"),
+        "{}",
+        text(&o)
+    );
+    assert!(
+        err.contains(&format!("byte {}", full.len() * 2 / 3)),
+        "{}",
+        text(&o)
+    );
+}

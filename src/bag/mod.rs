@@ -24,7 +24,7 @@ mod read;
 mod write;
 
 pub use metadata::Qos;
-pub use read::{Bag, BagMessage, Storage, TopicInfo};
+pub use read::{parse_mcap, Bag, BagMessage, Storage, TopicInfo};
 pub use write::{BagSummary, BagWriter};
 
 use std::path::PathBuf;

@@ -1,4 +1,8 @@
 //! Reading rosbag2 bags (MCAP and sqlite3 storage).
+//!
+//! A truncated or incomplete MCAP (a recording cut off before its footer)
+//! is reported as such, with the byte where the data ends and the record it
+//! ends in; the mcap crate alone only said "Bad magic number".
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -75,10 +79,106 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> BagError + '_ {
     }
 }
 
-fn mcap_err(path: &Path) -> impl Fn(mcap::McapError) -> BagError + '_ {
+/// The 8-byte magic that opens and closes an MCAP file.
+const MCAP_MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+
+/// Why `buf` is an incomplete MCAP file, if it is one: where the data ends
+/// (inside which record, after how many whole ones). `None` when it has
+/// both magics or is no MCAP at all. Linear in the number of records.
+fn mcap_truncation(buf: &[u8]) -> Option<String> {
+    if !buf.starts_with(MCAP_MAGIC) {
+        return (buf.len() < 8 && MCAP_MAGIC.starts_with(buf)).then(|| {
+            format!(
+                "truncated MCAP: the file has {} bytes, less than the 8-byte magic",
+                buf.len()
+            )
+        });
+    }
+    if buf.len() >= 16 && buf.ends_with(MCAP_MAGIC) {
+        return None;
+    }
+    let (mut pos, mut records) = (8usize, 0usize);
+    let end = buf.len();
+    let whole = |records: usize| format!("after {records} complete records");
+    loop {
+        if pos == end {
+            return Some(format!(
+                "truncated or incomplete MCAP: the data ends at byte {end} {}, without the footer and end magic (the recording was cut off)",
+                whole(records)
+            ));
+        }
+        let Some(head) = buf.get(pos..pos + 9) else {
+            return Some(format!(
+                "truncated MCAP: the data ends at byte {end} inside the header of the record at byte {pos}, {}",
+                whole(records)
+            ));
+        };
+        let mut len = [0u8; 8];
+        len.copy_from_slice(&head[1..]);
+        let len = u64::from_le_bytes(len);
+        let next = (pos as u64 + 9).saturating_add(len);
+        if next > end as u64 {
+            return Some(format!(
+                "truncated MCAP: the data ends at byte {end} inside the record (opcode 0x{:02x}) at byte {pos} that announces {len} bytes, {}",
+                head[0],
+                whole(records)
+            ));
+        }
+        if head[0] == 0x02 {
+            return Some(format!(
+                "incomplete MCAP: the footer at byte {pos} is not followed by the end magic (file of {end} bytes)"
+            ));
+        }
+        pos = next as usize;
+        records += 1;
+    }
+}
+
+/// Largest uncompressed chunk accepted (rosbag2 writes 4 MiB chunks by
+/// default). The mcap crate allocates a chunk's declared uncompressed size
+/// before decompressing: a mutated size of 3.4·10¹⁸ aborted the process
+/// (found by the short fuzz pass).
+const MAX_CHUNK_BYTES: u64 = 1 << 30;
+
+/// Walk the top-level records and reject a chunk (opcode 0x06) that
+/// declares more than [`MAX_CHUNK_BYTES`] uncompressed; the walk stops at a
+/// truncation, which the mcap crate reports. Linear in the record count.
+fn check_chunks(path: &Path, buf: &[u8]) -> Result<(), BagError> {
+    let mut pos = 8usize;
+    while let Some(head) = buf.get(pos..pos + 9) {
+        let mut len = [0u8; 8];
+        len.copy_from_slice(&head[1..]);
+        let len = u64::from_le_bytes(len);
+        if head[0] == 0x06 {
+            if let Some(size) = buf.get(pos + 9 + 16..pos + 9 + 24) {
+                let mut b = [0u8; 8];
+                b.copy_from_slice(size);
+                let size = u64::from_le_bytes(b);
+                if size > MAX_CHUNK_BYTES {
+                    return Err(BagError::Mcap {
+                        path: path.to_path_buf(),
+                        message: format!(
+                            "the chunk at byte {pos} declares {size} uncompressed bytes, more than {MAX_CHUNK_BYTES}"
+                        ),
+                    });
+                }
+            }
+        }
+        match usize::try_from(len).ok().and_then(|l| (pos + 9).checked_add(l)) {
+            Some(next) if next <= buf.len() => pos = next,
+            _ => break,
+        }
+    }
+    Ok(())
+}
+
+fn mcap_err<'a>(path: &'a Path, buf: &'a [u8]) -> impl Fn(mcap::McapError) -> BagError + 'a {
     move |e| BagError::Mcap {
         path: path.to_path_buf(),
-        message: e.to_string(),
+        message: match mcap_truncation(buf) {
+            Some(why) => format!("{why} ({e})"),
+            None => e.to_string(),
+        },
     }
 }
 
@@ -223,11 +323,33 @@ impl ChannelInfo {
     }
 }
 
+/// The topics and messages of MCAP bytes held in memory (`path` names them
+/// in errors): what [`Bag::open`] and [`Bag::read`] do with one file, for
+/// the fuzz targets and for callers that already hold the bytes.
+///
+/// # Errors
+/// [`BagError::Mcap`] for corrupt or truncated MCAP.
+pub fn parse_mcap(path: &Path, buf: &[u8]) -> Result<(Vec<TopicInfo>, Vec<BagMessage>), BagError> {
+    let topics = mcap_topics_in(path, buf, &mut Vec::new())?;
+    let mut messages = Vec::new();
+    read_mcap_in(path, buf, &|_| true, &mut messages)?;
+    Ok((topics, messages))
+}
+
 fn mcap_topics(path: &Path, skipped: &mut Vec<String>) -> Result<Vec<TopicInfo>, BagError> {
     let buf = std::fs::read(path).map_err(io_err(path))?;
+    mcap_topics_in(path, &buf, skipped)
+}
+
+fn mcap_topics_in(
+    path: &Path,
+    buf: &[u8],
+    skipped: &mut Vec<String>,
+) -> Result<Vec<TopicInfo>, BagError> {
+    check_chunks(path, buf)?;
     let mut counts: BTreeMap<u16, u64> = BTreeMap::new();
     let mut channels: BTreeMap<u16, ChannelInfo> = BTreeMap::new();
-    match mcap::Summary::read(&buf).map_err(mcap_err(path))? {
+    match mcap::Summary::read(buf).map_err(mcap_err(path, buf))? {
         Some(summary) if summary.stats.is_some() => {
             if let Some(stats) = &summary.stats {
                 counts = stats.channel_message_counts.clone();
@@ -237,8 +359,8 @@ fn mcap_topics(path: &Path, skipped: &mut Vec<String>) -> Result<Vec<TopicInfo>,
             }
         }
         _ => {
-            for m in mcap::MessageStream::new(&buf).map_err(mcap_err(path))? {
-                let m = m.map_err(mcap_err(path))?;
+            for m in mcap::MessageStream::new(buf).map_err(mcap_err(path, buf))? {
+                let m = m.map_err(mcap_err(path, buf))?;
                 *counts.entry(m.channel.id).or_default() += 1;
                 channels
                     .entry(m.channel.id)
@@ -277,8 +399,18 @@ fn read_mcap(
     out: &mut Vec<BagMessage>,
 ) -> Result<(), BagError> {
     let buf = std::fs::read(path).map_err(io_err(path))?;
-    for m in mcap::MessageStream::new(&buf).map_err(mcap_err(path))? {
-        let m = m.map_err(mcap_err(path))?;
+    read_mcap_in(path, &buf, wanted, out)
+}
+
+fn read_mcap_in(
+    path: &Path,
+    buf: &[u8],
+    wanted: &dyn Fn(&str) -> bool,
+    out: &mut Vec<BagMessage>,
+) -> Result<(), BagError> {
+    check_chunks(path, buf)?;
+    for m in mcap::MessageStream::new(buf).map_err(mcap_err(path, buf))? {
+        let m = m.map_err(mcap_err(path, buf))?;
         if m.channel.message_encoding != "cdr" || !wanted(&m.channel.topic) {
             continue;
         }
@@ -387,4 +519,48 @@ fn read_sqlite(
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn committed_bag() -> Vec<u8> {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/bags/synth_ellipsoid.mcap");
+        std::fs::read(p).unwrap()
+    }
+
+    #[test]
+    fn a_truncated_mcap_says_where_it_ends() {
+        let full = committed_bag();
+        assert_eq!(mcap_truncation(&full), None);
+        let dir = tempfile::tempdir().unwrap();
+        for cut in [full.len() / 2, full.len() - 3, 12, 5] {
+            let f = dir.path().join(format!("cut{cut}.mcap"));
+            std::fs::write(&f, &full[..cut]).unwrap();
+            let e = Bag::open(&f).unwrap_err().to_string();
+            assert!(
+                e.contains("truncated") || e.contains("incomplete"),
+                "{cut}: {e}"
+            );
+            assert!(e.contains(&format!("{cut}")), "{cut}: {e}");
+            assert!(e.contains(&format!("cut{cut}.mcap")), "{e}");
+        }
+        // The cut in the middle names the record it falls in.
+        let e = mcap_truncation(&full[..full.len() / 2]).unwrap();
+        assert!(e.contains("inside the record (opcode 0x"), "{e}");
+        // A chunk that lies about its uncompressed size is an error, not an
+        // abort on the allocation (the fuzz pass's finding, rebuilt here).
+        let mut pos = 8;
+        while full[pos] != 0x06 {
+            let len = u64::from_le_bytes(full[pos + 1..pos + 9].try_into().unwrap());
+            pos += 9 + len as usize;
+        }
+        let mut lie = full.clone();
+        lie[pos + 25..pos + 33].copy_from_slice(&3_467_835_911_653_498_921u64.to_le_bytes());
+        let e = parse_mcap(Path::new("lie.mcap"), &lie).unwrap_err().to_string();
+        assert!(e.contains("uncompressed bytes"), "{e}");
+        // Not an MCAP at all: no truncation story.
+        assert_eq!(mcap_truncation(b"PAR1 something else"), None);
+    }
 }

@@ -96,6 +96,8 @@ pub fn run(
     let cfg = Config::load(config, set).context("loading configuration")?;
     let direction = parse_direction(direction, cfg.separability.normal_k)?;
     let size = parse_size(size)?;
+    sepmem::io::check_output(output, sepmem::io::OutputKind::Cloud)
+        .context("checking the output path before filtering")?;
     let start = Instant::now();
     let loaded = sepmem::io::load_cloud(input)
         .with_context(|| format!("reading point cloud {}", input.display()))?;

@@ -16,6 +16,8 @@ pub fn run(
     report: Option<&Path>,
 ) -> Result<()> {
     let cfg = Config::load(config, set).context("loading configuration")?;
+    sepmem::io::check_output(output, sepmem::io::OutputKind::Mesh)
+        .context("checking the output path before reconstructing")?;
     let loaded = sepmem::io::load_cloud(input)
         .with_context(|| format!("reading point cloud {}", input.display()))?;
     let read_dropped = loaded.report.dropped_non_finite;

@@ -375,18 +375,16 @@ pub fn run_opts(
     bar.finish_and_clear();
     latencies.sort_by(f64::total_cmp);
     println!(
-        "summary: {} samples, {} frames ok ({} warm, {} cold), {} failed, {} bad samples; latency ms p50 {:.1} p95 {:.1} max {:.1}; mean iterations warm {:.1} cold {:.1}; {}",
+        "summary: {} samples, {} frames ok ({} warm, {} cold), {} failed, {} bad samples; {}; mean iterations warm {} cold {}; {}",
         messages.len(),
         latencies.len(),
         warm_it.len(),
         cold_it.len(),
         failed,
         bad_samples,
-        percentile(&latencies, 0.5),
-        percentile(&latencies, 0.95),
-        latencies.last().copied().unwrap_or(f64::NAN),
-        mean(&warm_it),
-        mean(&cold_it),
+        latency_summary(&latencies),
+        one_decimal(mean(&warm_it)),
+        one_decimal(mean(&cold_it)),
         if p.deadline_ms > 0.0 {
             format!(
                 "deadlines {} ms warm, {} ms cold",
@@ -454,6 +452,28 @@ pub fn run_opts(
         );
     }
     Ok(())
+}
+
+/// `latency ms p50 … p95 … max …` of sorted latencies, or a plain
+/// sentence when no frame succeeded (it printed "p50 NaN" before).
+fn latency_summary(sorted: &[f64]) -> String {
+    match sorted.last() {
+        Some(max) => format!(
+            "latency ms p50 {:.1} p95 {:.1} max {max:.1}",
+            percentile(sorted, 0.5),
+            percentile(sorted, 0.95)
+        ),
+        None => "latency: none (no frame succeeded)".to_string(),
+    }
+}
+
+/// A value with one decimal, `-` when it is undefined (an empty mean).
+fn one_decimal(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.1}")
+    } else {
+        "-".to_string()
+    }
 }
 
 fn mean(v: &[f64]) -> f64 {

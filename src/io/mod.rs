@@ -16,7 +16,7 @@
 //! | PLY (ascii, binary little/big endian) | [`ply`] | [`ply`] | binary little-endian mesh with per-vertex scalars and colour; cloud with colour |
 //! | PCL PCD (ascii, binary, binary_compressed/LZF) | [`pcd`] | – | – |
 //! | XYZ text (`x y z [extra columns]`) | [`xyz`] | – | – |
-//! | Wavefront OBJ (via `tobj`) | referenced vertices | [`obj`] | [`obj`] |
+//! | Wavefront OBJ (mesh via `tobj`) | every `v` record | [`obj`] | [`obj`] |
 //!
 //! [`load_cloud`] and [`load_mesh`] dispatch on the file extension. Malformed
 //! input (bad header, truncated data, unsupported types, count mismatches,
@@ -207,7 +207,7 @@ pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>, IoError> {
 }
 
 /// Load a point cloud, choosing the reader by extension: `.ply`, `.pcd`,
-/// `.xyz`/`.txt`/`.csv`, or `.obj` (its vertices). NaN/inf points are dropped
+/// `.xyz`/`.txt`/`.csv`, or `.obj` (every `v` record, faces or not). NaN/inf points are dropped
 /// and counted in the report.
 ///
 /// # Errors
@@ -218,19 +218,7 @@ pub fn load_cloud(path: impl AsRef<Path>) -> Result<LoadedCloud, IoError> {
         "ply" => ply::read_cloud(path),
         "pcd" => pcd::read_cloud(path),
         "xyz" | "txt" | "csv" => xyz::read_cloud(path),
-        "obj" => {
-            let m = obj::read_mesh(path)?;
-            let points_read = m.mesh.vertices.len() + m.report.dropped_non_finite;
-            Ok(LoadedCloud {
-                cloud: PointCloud::from_points(m.mesh.vertices),
-                report: LoadReport {
-                    points_read,
-                    dropped_non_finite: m.report.dropped_non_finite,
-                    width: points_read - m.report.dropped_non_finite,
-                    height: 1,
-                },
-            })
-        }
+        "obj" => obj::read_cloud(path),
         _ => Err(IoError::UnknownFormat {
             path: path.to_path_buf(),
             expected: ".ply, .pcd, .xyz, .txt, .csv, .obj",
@@ -288,6 +276,53 @@ pub fn save_cloud(path: impl AsRef<Path>, cloud: &PointCloud) -> Result<(), IoEr
             expected: ".ply, .pcd",
         }),
     }
+}
+
+/// What an output file will hold, for [`check_output`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutputKind {
+    /// A mesh ([`save_mesh`]: `.ply`, `.obj`).
+    Mesh,
+    /// A point cloud ([`save_cloud`]: `.ply`, `.pcd`).
+    Cloud,
+}
+
+/// Check, before any long computation, that `path` has an extension the
+/// writer supports and can be opened for writing (its folder exists and is
+/// writable). A file this creates is removed again; an existing file is
+/// left as it is. An unwritable output was reported only after the whole
+/// reconstruction before.
+///
+/// # Errors
+/// [`IoError::UnknownFormat`] or [`IoError::Io`] naming the file.
+pub fn check_output(path: impl AsRef<Path>, kind: OutputKind) -> Result<(), IoError> {
+    let path = path.as_ref();
+    let (ok, expected) = match (kind, extension(path).as_str()) {
+        (OutputKind::Mesh, "ply" | "obj") | (OutputKind::Cloud, "ply" | "pcd") => (true, ""),
+        (OutputKind::Mesh, _) => (false, ".ply, .obj"),
+        (OutputKind::Cloud, _) => (false, ".ply, .pcd"),
+    };
+    if !ok {
+        return Err(IoError::UnknownFormat {
+            path: path.to_path_buf(),
+            expected,
+        });
+    }
+    let existed = path.exists();
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(path)
+        .map_err(|source| IoError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    if !existed {
+        // Best effort: the real write follows and replaces it anyway.
+        let _ = std::fs::remove_file(path);
+    }
+    Ok(())
 }
 
 /// Drop the non-finite points of a freshly read cloud and build its report.
@@ -392,6 +427,27 @@ mod tests {
         assert_eq!(m.vertices.len(), 3);
         assert_eq!(m.triangles, vec![[0, 1, 2]]);
         assert_eq!(m.vertex_scalars[0].1, vec![0.0, 2.0, 3.0]);
+    }
+
+    #[test]
+    fn outputs_are_checked_before_the_work() {
+        let dir = tempfile::tempdir().unwrap();
+        let ok = dir.path().join("m.ply");
+        check_output(&ok, OutputKind::Mesh).unwrap();
+        assert!(!ok.exists(), "the probe file is removed");
+        let missing = dir.path().join("no/such/dir/m.obj");
+        let e = check_output(&missing, OutputKind::Mesh).unwrap_err();
+        assert!(
+            matches!(e, IoError::Io { .. }) && e.to_string().contains("m.obj"),
+            "{e}"
+        );
+        let e = check_output(dir.path().join("m.pcd"), OutputKind::Mesh).unwrap_err();
+        assert!(matches!(e, IoError::UnknownFormat { .. }), "{e}");
+        check_output(dir.path().join("c.pcd"), OutputKind::Cloud).unwrap();
+        // A folder is not a writable file.
+        assert!(check_output(dir.path().join("d.ply"), OutputKind::Cloud).is_ok());
+        std::fs::create_dir(dir.path().join("d.ply")).unwrap();
+        assert!(check_output(dir.path().join("d.ply"), OutputKind::Cloud).is_err());
     }
 
     #[test]

@@ -5,12 +5,14 @@
 //! `tobj` numbers the vertices in order of first use by a face and leaves
 //! out vertices no face uses; the report gives the file's `v` count and how
 //! many were left out.
+//! Read as a point cloud ([`parse_cloud`]), every `v` record is a point: a
+//! vertex-only OBJ read as "empty" before.
 //! Several objects/groups are concatenated; vertices that `tobj` split
 //! between groups are merged back by exact position so that a closed mesh
 //! stays closed.
 
-use super::{read_bytes, IoError, LoadedMesh, MeshReport};
-use crate::cloud::Vec3;
+use super::{read_bytes, IoError, LoadedCloud, LoadedMesh, MeshReport};
+use crate::cloud::{Attribute, PointCloud, Vec3};
 use crate::mesh::TriMesh;
 use std::collections::HashMap;
 use std::io::Write;
@@ -98,6 +100,73 @@ pub fn parse_mesh(bytes: &[u8], path: &Path) -> Result<LoadedMesh, IoError> {
     })
 }
 
+/// Parse OBJ bytes as a point cloud: every `v x y z [w]` record (faces and
+/// everything else ignored), so that a vertex-only OBJ (a scan exported as
+/// points) is a cloud rather than an empty mesh. `v x y z r g b` (the common
+/// colour extension) gives the channels `r`, `g`, `b`.
+///
+/// # Errors
+/// [`IoError::Parse`] naming the line of a `v` record that is not 3, 4 or 6
+/// numbers.
+pub fn parse_cloud(bytes: &[u8], path: &Path) -> Result<LoadedCloud, IoError> {
+    let mut points = Vec::new();
+    let mut rgb: [Vec<f32>; 3] = Default::default();
+    let mut values: Vec<f64> = Vec::with_capacity(6);
+    let mut first_coloured: Option<bool> = None;
+    for (i, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        let line = line.trim_ascii();
+        if line.len() < 2 || line[0] != b'v' || !line[1].is_ascii_whitespace() {
+            continue;
+        }
+        let bad = |reason: String| IoError::Parse {
+            path: path.to_path_buf(),
+            line: i + 1,
+            reason,
+        };
+        let text = std::str::from_utf8(&line[2..]).map_err(|_| bad("not text".into()))?;
+        values.clear();
+        for t in text.split_ascii_whitespace() {
+            values.push(
+                t.parse()
+                    .map_err(|_| bad(format!("cannot parse {t:?} as a number")))?,
+            );
+        }
+        let coloured = values.len() == 6;
+        if !matches!(values.len(), 3 | 4 | 6) || *first_coloured.get_or_insert(coloured) != coloured
+        {
+            return Err(bad(format!(
+                "vertex with {} values (x y z [w] or x y z r g b on every line)",
+                values.len()
+            )));
+        }
+        points.push(Vec3::new(values[0], values[1], values[2]));
+        if coloured {
+            for (c, v) in rgb.iter_mut().zip(&values[3..]) {
+                c.push(*v as f32);
+            }
+        }
+    }
+    let n = points.len();
+    let mut cloud = PointCloud::from_points(points);
+    if !rgb[0].is_empty() {
+        for (name, v) in ["r", "g", "b"].into_iter().zip(rgb) {
+            cloud.attributes.push(Attribute {
+                name: name.into(),
+                values: v,
+            });
+        }
+    }
+    Ok(super::finish_cloud(cloud, n, 1))
+}
+
+/// Read an OBJ file's vertices as a point cloud (see [`parse_cloud`]).
+///
+/// # Errors
+/// [`IoError`] naming the file and the problem.
+pub fn read_cloud(path: &Path) -> Result<LoadedCloud, IoError> {
+    parse_cloud(&read_bytes(path)?, path)
+}
+
 /// Read an OBJ file as a triangle mesh.
 ///
 /// # Errors
@@ -170,6 +239,21 @@ mod tests {
         assert_eq!(m.mesh.vertices.len(), 4);
         assert!(m.mesh.topology().is_watertight());
         assert!((m.mesh.signed_volume() - 1.0 / 6.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn vertex_only_obj_is_a_cloud() {
+        let text = b"# points\nv 0 0 0\nv 1 0 0\nv 0 1 0 1.0\n  v 0 0 nan\nvn 0 0 1\n";
+        let c = parse_cloud(text, Path::new("p.obj")).unwrap();
+        assert_eq!(c.report.points_read, 4);
+        assert_eq!(c.report.dropped_non_finite, 1);
+        assert_eq!(c.cloud.points[2], Vec3::new(0.0, 1.0, 0.0));
+        let c = parse_cloud(b"v 0 0 0 1 0.5 0\nv 1 1 1 0 0 1\n", Path::new("c.obj")).unwrap();
+        assert_eq!(c.cloud.attribute("g").unwrap(), &[0.5, 0.0]);
+        let e = parse_cloud(b"v 0 0 0\nv 1 x 0\n", Path::new("b.obj")).unwrap_err();
+        assert!(matches!(e, IoError::Parse { line: 2, .. }), "{e}");
+        let e = parse_cloud(b"v 0 0 0 1 1 1\nv 1 0 0\n", Path::new("b.obj")).unwrap_err();
+        assert!(matches!(e, IoError::Parse { line: 2, .. }), "{e}");
     }
 
     #[test]

@@ -118,6 +118,7 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
         }
         .into());
     }
+    crate::cloud::check_spread(&finite)?;
     let (keep, d_kept) =
         if cfg.density_sample > 0 && finite.len() > cfg.density_sample && !cfg.local_delta {
             sampled_density(&finite, cfg)?

@@ -11,6 +11,13 @@
 //! * every other numeric field (`intensity`, `label`, …) → a channel of that
 //!   name as `f32` (a field with `count > 1` gives `name_0`, `name_1`, …).
 //!
+//! Decoding is linear in the message size (measured by the regression test
+//! `absurd_field_count_is_rejected_in_linear_time` and the fuzz targets):
+//! the fields may expand into at most `min(point_step, MAX_CHANNELS)`
+//! channels (checked before a single name is formatted), and channel names
+//! are deduplicated in a hash set. Before this, a 133-byte message with one
+//! INT8 field of count 4·10⁹ stalled a compute thread for good.
+//!
 //! Points with a NaN or infinite coordinate are skipped and counted, never
 //! an error. Layout problems (field outside `point_step`, data shorter than
 //! `row_step · height`, `row_step < width · point_step`, missing `x`/`y`/`z`,
@@ -22,7 +29,7 @@
 //! FLOAT32 `rgb` when the cloud has colour, and every other channel as a
 //! FLOAT32 field of its name, little-endian and unorganised.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -108,6 +115,15 @@ pub enum PointCloud2Error {
         bytes: usize,
         /// Limit.
         max: usize,
+    },
+    /// The fields expand into more channels than `point_step` bytes can
+    /// hold, or than [`MAX_CHANNELS`].
+    #[error("PointCloud2 fields expand into {channels} channels, more than {max} (the smaller of point_step and {MAX_CHANNELS})")]
+    TooManyChannels {
+        /// Sum of the `count`s of the non-coordinate fields.
+        channels: u64,
+        /// The limit applied.
+        max: u64,
     },
     /// The CDR bytes are not a valid PointCloud2.
     #[error(transparent)]
@@ -196,6 +212,87 @@ fn read_u32_bits(p: &[u8], off: usize, be: bool) -> u32 {
     }
 }
 
+/// Most channels one PointCloud2 may expand into (a field with `count` k
+/// gives k channels). PCL's widest descriptor (SHOT, 1344 + 9 values) fits.
+pub const MAX_CHANNELS: u64 = 1 << 16;
+
+/// The channel names and one reader per channel (the first field claiming a
+/// channel name wins, e.g. `rgb` before separate `r`/`g`/`b`).
+///
+/// Linear in the field list: the expanded element count is checked against
+/// `point_step` and [`MAX_CHANNELS`] before any name is formatted, and
+/// names are checked for duplicates in a hash set.
+fn channel_layout(msg: &PointCloud2) -> Result<(Vec<String>, Vec<Reader>), PointCloud2Error> {
+    let expanded: u64 = msg
+        .fields
+        .iter()
+        .filter(|f| !matches!(f.name.as_str(), "x" | "y" | "z"))
+        .map(|f| u64::from(f.count))
+        .sum();
+    let max = MAX_CHANNELS.min(u64::from(msg.point_step));
+    if expanded > max {
+        return Err(PointCloud2Error::TooManyChannels {
+            channels: expanded,
+            max,
+        });
+    }
+    let mut names: Vec<String> = Vec::new();
+    let mut seen: HashSet<String> = HashSet::new();
+    let mut readers: Vec<Reader> = Vec::new();
+    for f in &msg.fields {
+        match f.name.as_str() {
+            "x" | "y" | "z" => {}
+            _ if f.count == 0 => {}
+            "rgb" | "rgba"
+                if matches!(
+                    f.datatype,
+                    PointField::FLOAT32 | PointField::UINT32 | PointField::INT32
+                ) =>
+            {
+                if ["r", "g", "b"].iter().any(|c| seen.contains(*c)) {
+                    continue;
+                }
+                readers.push(Reader {
+                    offset: f.offset as usize,
+                    datatype: f.datatype,
+                    channel: names.len(),
+                    kind: Kind::PackedRgb,
+                });
+                for c in ["r", "g", "b"] {
+                    seen.insert(c.to_string());
+                    names.push(c.to_string());
+                }
+            }
+            n => {
+                let size = datatype_size(f.datatype).unwrap_or(1);
+                let scale = if matches!(n, "r" | "g" | "b") && f.datatype == PointField::UINT8 {
+                    1.0 / 255.0
+                } else {
+                    1.0
+                };
+                for k in 0..f.count as usize {
+                    let name = if f.count == 1 {
+                        n.to_string()
+                    } else {
+                        format!("{n}_{k}")
+                    };
+                    if !seen.insert(name.clone()) {
+                        continue;
+                    }
+                    readers.push(Reader {
+                        offset: f.offset as usize + k * size,
+                        datatype: f.datatype,
+                        channel: names.len(),
+                        kind: Kind::Value { scale },
+                    });
+                    names.push(name);
+                }
+            }
+        }
+    }
+    Ok((names, readers))
+}
+
 /// Decode a PointCloud2 into a [`PointCloud`] (see the module docs).
 ///
 /// # Errors
@@ -268,59 +365,7 @@ pub fn decode_pointcloud2(
         });
     }
 
-    // Channel layout: one reader per channel (the first field claiming a
-    // channel name wins, e.g. `rgb` before separate `r`/`g`/`b`).
-    let mut names: Vec<String> = Vec::new();
-    let mut readers: Vec<Reader> = Vec::new();
-    for f in &msg.fields {
-        match f.name.as_str() {
-            "x" | "y" | "z" => {}
-            _ if f.count == 0 => {}
-            "rgb" | "rgba"
-                if matches!(
-                    f.datatype,
-                    PointField::FLOAT32 | PointField::UINT32 | PointField::INT32
-                ) =>
-            {
-                if ["r", "g", "b"].iter().any(|c| names.iter().any(|n| n == c)) {
-                    continue;
-                }
-                readers.push(Reader {
-                    offset: f.offset as usize,
-                    datatype: f.datatype,
-                    channel: names.len(),
-                    kind: Kind::PackedRgb,
-                });
-                names.extend(["r", "g", "b"].map(String::from));
-            }
-            n => {
-                let size = datatype_size(f.datatype).unwrap_or(1);
-                let scale = if matches!(n, "r" | "g" | "b") && f.datatype == PointField::UINT8 {
-                    1.0 / 255.0
-                } else {
-                    1.0
-                };
-                for k in 0..f.count as usize {
-                    let name = if f.count == 1 {
-                        n.to_string()
-                    } else {
-                        format!("{n}_{k}")
-                    };
-                    if names.contains(&name) {
-                        continue;
-                    }
-                    readers.push(Reader {
-                        offset: f.offset as usize + k * size,
-                        datatype: f.datatype,
-                        channel: names.len(),
-                        kind: Kind::Value { scale },
-                    });
-                    names.push(name);
-                }
-            }
-        }
-    }
-
+    let (names, readers) = channel_layout(msg)?;
     let n = points_in as usize;
     let be = msg.is_bigendian;
     let mut points = Vec::with_capacity(n);
@@ -610,6 +655,96 @@ mod tests {
             decode_pointcloud2(&xyz_cloud(false, false), &small),
             Err(PointCloud2Error::TooManyBytes { .. })
         ));
+    }
+
+    /// The 133-byte message of issue 22: x y z plus one INT8 field of count
+    /// 4·10⁹, point_step 4·10⁹ + 12, no points. It passes every size check;
+    /// the old decoder then formatted and searched 4·10⁹ names.
+    fn poisoned(count: u32) -> PointCloud2 {
+        let mut fields = vec![
+            field("x", 0, PointField::FLOAT32),
+            field("y", 4, PointField::FLOAT32),
+            field("z", 8, PointField::FLOAT32),
+        ];
+        fields.push(PointField {
+            name: "i".into(),
+            offset: 12,
+            datatype: PointField::INT8,
+            count,
+        });
+        PointCloud2 {
+            fields,
+            point_step: count.saturating_add(12),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn absurd_field_count_is_rejected_in_linear_time() {
+        let m = poisoned(4_000_000_000);
+        let bytes = super::super::encode(&m).unwrap();
+        assert!(bytes.len() <= 140, "{} bytes", bytes.len());
+        let e = decode_pointcloud2_cdr(&bytes, &WireConfig::default()).unwrap_err();
+        assert_eq!(
+            e,
+            PointCloud2Error::TooManyChannels {
+                channels: 4_000_000_000,
+                max: MAX_CHANNELS
+            }
+        );
+        // 10⁵ elements (45 s in `replay` before): rejected as well.
+        assert!(matches!(
+            decode_pointcloud2(&poisoned(100_000), &WireConfig::default()),
+            Err(PointCloud2Error::TooManyChannels { .. })
+        ));
+        // More channels than point_step bytes: only overlapping fields can do that.
+        let mut m = poisoned(8);
+        for name in ["j", "k"] {
+            m.fields.push(PointField {
+                name: name.into(),
+                offset: 12,
+                datatype: PointField::INT8,
+                count: 8,
+            });
+        }
+        assert_eq!(
+            decode_pointcloud2(&m, &WireConfig::default()),
+            Err(PointCloud2Error::TooManyChannels {
+                channels: 24,
+                max: 20
+            })
+        );
+    }
+
+    #[test]
+    fn forty_thousand_fields_decode_with_every_channel() {
+        // 4.2 s before (a linear name search per field); one point, 40 k UINT8 fields.
+        let n = 40_000u32;
+        let mut fields = vec![
+            field("x", 0, PointField::FLOAT32),
+            field("y", 4, PointField::FLOAT32),
+            field("z", 8, PointField::FLOAT32),
+        ];
+        fields.extend((0..n).map(|k| field(&format!("f{k}"), 12 + k, PointField::UINT8)));
+        let mut data = vec![0u8; 12 + n as usize];
+        for k in 0..n as usize {
+            data[12 + k] = (k % 251) as u8;
+        }
+        let m = PointCloud2 {
+            height: 1,
+            width: 1,
+            fields,
+            point_step: 12 + n,
+            row_step: 12 + n,
+            data,
+            ..Default::default()
+        };
+        let d = decode_pointcloud2(&m, &WireConfig::default()).unwrap();
+        assert_eq!(d.cloud.attributes.len(), n as usize);
+        assert_eq!(
+            d.cloud.attribute("f39999").unwrap(),
+            &[(39_999 % 251) as f32]
+        );
     }
 
     #[test]
