@@ -12,21 +12,22 @@
 use super::backend::{
     Backend, Frame, FrameResult, ObjectReport, Output, OutputKind, StatusEntry, TopicProcessor,
 };
+use super::reasons;
 use super::stats::Level;
 use crate::membrane::MembraneConfig;
 use crate::membrane::StopReason;
-use crate::pipeline::engine::{decode_sample, Processed, StreamCloud};
-use crate::pipeline::{outputs, PipelineConfig, StartPath, StreamKey, Tracker};
+use crate::pipeline::engine::{decode_sample, DecodedSample, StreamCloud};
+use crate::pipeline::objects::{cap_objects, Entry, FrameBudget, ObjectBook, Quality};
+use crate::pipeline::{outputs, FrameResult as PipelineResult, PipelineConfig, StartPath};
 use crate::transport::RosType;
 use crate::wire::msgs::{
-    DiagnosticArray, DiagnosticStatus, FrameDiagnostics, Header, KeyValue, MarkerArray,
+    DiagnosticArray, DiagnosticStatus, FrameDiagnostics, Header, KeyValue, Marker, MarkerArray,
     PointCloud2, SurfaceMesh, Time,
 };
 use crate::wire::pointcloud2::WireConfig;
 use crate::wire::{self, RosMessage};
 use rayon::prelude::*;
-use std::collections::BTreeMap;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 fn ty<M: RosMessage>() -> RosType {
     RosType::new(M::TYPE_NAME, M::TYPE_HASH)
@@ -60,131 +61,154 @@ struct EngineProcessor {
     membrane: MembraneConfig,
     pipeline: PipelineConfig,
     limits: WireConfig,
-    trackers: BTreeMap<StreamKey, Tracker>,
+    objects: ObjectBook,
     ns: String,
     last_header: Header,
 }
 
-fn encode<M: RosMessage>(
-    kind: OutputKind,
-    msg: &M,
-    out: &mut Vec<Output>,
-    errors: &mut Vec<String>,
-) {
-    match wire::encode(msg) {
-        Ok(payload) => out.push(Output { kind, payload }),
-        Err(e) => errors.push(format!("encoding {}: {e}", M::TYPE_NAME)),
+/// What a frame's objects produced so far.
+#[derive(Default)]
+struct FrameOut {
+    outputs: Vec<Output>,
+    markers: Vec<Marker>,
+    objects: Vec<ObjectReport>,
+    errors: Vec<String>,
+    counts: Vec<(&'static str, u64)>,
+}
+
+impl FrameOut {
+    fn encode<M: RosMessage>(&mut self, kind: OutputKind, msg: &M) {
+        match wire::encode(msg) {
+            Ok(payload) => self.outputs.push(Output { kind, payload }),
+            Err(e) => {
+                self.errors.push(format!("encoding {}: {e}", M::TYPE_NAME));
+                reasons::bump(&mut self.counts, reasons::OUTPUTS_FAILED, 1);
+            }
+        }
+    }
+}
+
+impl EngineProcessor {
+    /// The outputs of one evolved object: its verdict decides whether this
+    /// frame's mesh or the object's last fitted one is published
+    /// ([`crate::pipeline::objects`]).
+    fn emit(
+        &self,
+        entry: &mut Entry,
+        r: &PipelineResult,
+        sample: &DecodedSample,
+        out: &mut FrameOut,
+    ) {
+        let rep = &r.reconstruction.report;
+        let verdict = entry.verdict(r, &self.pipeline.objects);
+        let (mesh, marker, shown) = entry.publish(
+            verdict,
+            outputs::surface_mesh(r, &sample.header),
+            outputs::separability_marker(r, &sample.header, &self.ns),
+        );
+        out.encode(OutputKind::Mesh, &mesh);
+        out.encode(
+            OutputKind::FrameDiagnostics,
+            &outputs::frame_diagnostics(r, &sample.header, sample.points_in, sample.dropped),
+        );
+        out.markers.push(marker);
+        if !verdict.is_fitted() {
+            reasons::bump(&mut out.counts, reasons::UNFITTED, 1);
+        }
+        let warm = r.path == StartPath::Warm;
+        let level = if rep.stop == StopReason::Deadline || !verdict.is_fitted() {
+            Level::Warn
+        } else {
+            Level::Ok
+        };
+        let shown_note = if shown == Quality::Held {
+            "; showing the last fitted mesh"
+        } else {
+            ""
+        };
+        out.objects.push(ObjectReport {
+            stream: r.stream.to_string(),
+            eta_g: rep.eta_final,
+            iterations: u32::try_from(r.iterations).unwrap_or(u32::MAX),
+            warm,
+            level,
+            message: format!(
+                "{} start ({}), stop: {}, surface {}{shown_note}",
+                if warm { "warm" } else { "cold" },
+                r.reason,
+                rep.stop,
+                verdict.as_str(),
+            ),
+            quality: Some(shown.as_str()),
+        });
     }
 }
 
 impl TopicProcessor for EngineProcessor {
     fn process(&mut self, frame: &Frame) -> FrameResult {
+        let mut out = FrameOut::default();
         let mut sample =
             match decode_sample(&frame.topic, &frame.payload, &self.limits, &self.pipeline) {
                 Ok(s) => s,
                 Err(e) => {
+                    reasons::bump(&mut out.counts, reasons::of_sample_error(&e), 1);
                     return FrameResult {
                         error: Some(e.to_string()),
+                        counts: out.counts,
                         ..FrameResult::default()
-                    }
+                    };
                 }
             };
         self.last_header = sample.header.clone();
-        let streams = std::mem::take(&mut sample.streams);
-        // The node's deadline runs from receipt. The objects of a labelled
-        // cloud are evolved in parallel, each with what is left of it, but
-        // never less than a quarter of the configured budget (so that a late
-        // frame still gets a few iterations; it is then counted as late).
-        let mut pipeline = self.pipeline.clone();
-        // A cold start's longer budget shrinks by the same time already spent.
-        if pipeline.deadline_ms > 0.0 {
-            let remaining = frame.deadline.saturating_duration_since(Instant::now());
-            let left = (remaining.as_secs_f64() * 1e3).max(0.25 * pipeline.deadline_ms);
-            pipeline.cold_deadline_ms = pipeline.cold_budget_ms() - (pipeline.deadline_ms - left);
-            pipeline.deadline_ms = left;
-        }
-        let mut work: Vec<(Tracker, StreamCloud)> = streams
+        let mut streams = std::mem::take(&mut sample.streams);
+        let skipped = cap_objects(&mut streams, self.pipeline.objects.max_per_frame);
+        reasons::bump(&mut out.counts, reasons::OBJECTS_SKIPPED, skipped as u64);
+        // The node's deadline runs from receipt; every object of a labelled
+        // cloud shares it, however many compute waves the objects take.
+        let budget = FrameBudget::new(frame.deadline, &self.pipeline);
+        let mut work: Vec<(Entry, StreamCloud)> = streams
             .into_iter()
-            .map(|s| {
-                let t = self
-                    .trackers
-                    .remove(&s.key)
-                    .unwrap_or_else(|| Tracker::new(s.key.clone()));
-                (t, s)
-            })
+            .map(|s| (self.objects.checkout(&s.key), s))
             .collect();
-        let membrane = &self.membrane;
-        let outcomes: Vec<Processed> = work
+        let (membrane, pipeline) = (&self.membrane, &self.pipeline);
+        let outcomes: Vec<_> = work
             .par_iter_mut()
-            .map(|(t, s)| Processed {
-                key: s.key.clone(),
-                points: s.cloud.len(),
-                outcome: t.process(&s.cloud, membrane, &pipeline),
+            .map(|(e, s)| {
+                e.tracker
+                    .process(&s.cloud, membrane, &budget.config_now(pipeline))
             })
             .collect();
-        for (t, s) in work {
-            self.trackers.insert(s.key, t);
-        }
-        let processed = outcomes;
-        let mut outs = Vec::with_capacity(2 * processed.len() + 1);
-        let mut errors = Vec::new();
-        let mut objects = Vec::with_capacity(processed.len());
-        let mut ok = Vec::with_capacity(processed.len());
-        for p in &processed {
-            match &p.outcome {
-                Ok(r) => {
-                    let rep = &r.reconstruction.report;
-                    encode(
-                        OutputKind::Mesh,
-                        &outputs::surface_mesh(r, &sample.header),
-                        &mut outs,
-                        &mut errors,
-                    );
-                    encode(
-                        OutputKind::FrameDiagnostics,
-                        &outputs::frame_diagnostics(
-                            r,
-                            &sample.header,
-                            sample.points_in,
-                            sample.dropped,
-                        ),
-                        &mut outs,
-                        &mut errors,
-                    );
-                    let warm = r.path == StartPath::Warm;
-                    let level = if rep.stop == StopReason::Deadline {
-                        Level::Warn
-                    } else {
-                        Level::Ok
-                    };
-                    objects.push(ObjectReport {
-                        stream: r.stream.to_string(),
-                        eta_g: rep.eta_final,
-                        iterations: u32::try_from(r.iterations).unwrap_or(u32::MAX),
-                        warm,
-                        level,
-                        message: format!(
-                            "{} start ({}), stop: {}",
-                            if warm { "warm" } else { "cold" },
-                            r.reason,
-                            rep.stop
-                        ),
-                    });
-                    ok.push(r);
+        for ((mut entry, _), outcome) in work.into_iter().zip(outcomes) {
+            match outcome {
+                Ok(r) => self.emit(&mut entry, &r, &sample, &mut out),
+                Err(e) => {
+                    reasons::bump(&mut out.counts, reasons::OBJECT_ERRORS, 1);
+                    out.errors.push(e.to_string());
                 }
-                Err(e) => errors.push(e.to_string()),
             }
+            self.objects.checkin(entry, frame.received_ns);
         }
-        let markers: MarkerArray = outputs::marker_array(&ok, &sample.header, &self.ns);
-        encode(OutputKind::Markers, &markers, &mut outs, &mut errors);
+        let evicted = self
+            .objects
+            .evict(frame.received_ns, &self.pipeline.objects);
+        reasons::bump(
+            &mut out.counts,
+            reasons::LABELS_EVICTED,
+            evicted.len() as u64,
+        );
+        let markers =
+            outputs::cleared_markers(std::mem::take(&mut out.markers), &sample.header, &self.ns);
+        out.encode(OutputKind::Markers, &markers);
         FrameResult {
-            outputs: outs,
-            objects,
-            error: if errors.is_empty() {
+            outputs: out.outputs,
+            objects: out.objects,
+            error: if out.errors.is_empty() {
                 None
             } else {
-                Some(errors.join("; "))
+                Some(out.errors.join("; "))
             },
+            counts: out.counts,
+            evicted: evicted.iter().map(ToString::to_string).collect(),
         }
     }
 
@@ -223,12 +247,23 @@ impl Backend for PipelineBackend {
             .then(|| Duration::from_secs_f64(self.pipeline.deadline_ms / 1e3))
     }
 
+    fn max_message_bytes(&self) -> Option<usize> {
+        // What `decode_pointcloud2_cdr` accepts (data plus 64 KiB of header
+        // and fields), plus 4 KiB of zenoh framing (key, attachment).
+        Some(self.limits.max_bytes.saturating_add((1 << 16) + 4096))
+    }
+
+    fn frame_budget(&self) -> Option<Duration> {
+        (self.pipeline.deadline_ms > 0.0)
+            .then(|| Duration::from_secs_f64(self.pipeline.cold_budget_ms() / 1e3))
+    }
+
     fn processor(&self, _topic: &str) -> Box<dyn TopicProcessor> {
         Box::new(EngineProcessor {
             membrane: self.membrane.clone(),
             pipeline: self.pipeline.clone(),
             limits: self.limits.clone(),
-            trackers: BTreeMap::new(),
+            objects: ObjectBook::default(),
             ns: self.pipeline.marker_namespace.clone(),
             last_header: Header::default(),
         })
