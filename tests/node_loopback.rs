@@ -245,6 +245,16 @@ async fn stop(
         .unwrap()
 }
 
+/// The summary of one stream of a stopped node.
+fn stream_of(summary: &NodeSummary, topic: &str) -> sepmem::node::runtime::StreamSummary {
+    summary
+        .streams
+        .iter()
+        .find(|s| s.topic == topic)
+        .unwrap()
+        .clone()
+}
+
 fn any_type(name: &str) -> RosType {
     RosType::new(name, "x")
 }
@@ -324,14 +334,7 @@ async fn overload_keeps_newest_counts_drops_and_isolates_a_malformed_stream() {
     )
     .await;
     let summary = stop(stop_tx, node).await;
-    let get = |t: &str| {
-        summary
-            .streams
-            .iter()
-            .find(|s| s.topic == t)
-            .unwrap()
-            .clone()
-    };
+    let get = |t: &str| stream_of(&summary, t);
     let slow_s = get("/ovl/slow");
     let slow_seen: Vec<u64> = seen
         .lock()
@@ -612,14 +615,7 @@ async fn a_stalled_or_greedy_stream_is_reported_and_the_others_keep_running() {
     .await;
     let processed_light = count("/grd/light") - 1;
     let summary = stop(stop_tx, node).await;
-    let get = |t: &str| {
-        summary
-            .streams
-            .iter()
-            .find(|s| s.topic == t)
-            .unwrap()
-            .clone()
-    };
+    let get = |t: &str| stream_of(&summary, t);
     let greedy_s = get("/grd/greedy");
     let over = greedy_s.reasons.get("over_budget").copied().unwrap_or(0);
     // 100 frames of 60 ms in 2 s at 0.2 core: at most about 0.4 s + the

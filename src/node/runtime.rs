@@ -552,10 +552,14 @@ async fn compute(ctx: &StreamCtx, mut p: Box<dyn TopicProcessor>) -> Computed {
 /// counted as `over_budget`. Returns `false` at shutdown.
 async fn sit_out(ctx: &StreamCtx, debt: Duration) -> bool {
     let dropped = ctx.stream.slot.dropped();
+    // A stream with a frame waiting is not silent: never evicted meanwhile.
+    ctx.stream.busy.store(true, Ordering::Release);
     let running = tokio::select! {
         () = tokio::time::sleep(debt) => true,
         () = wait_stop(ctx.stop.clone()) => false,
     };
+    ctx.stream.slot.touch(now_ns());
+    ctx.stream.busy.store(false, Ordering::Release);
     let n = ctx.stream.slot.dropped().saturating_sub(dropped) + 1;
     *lock(&ctx.stream.stats)
         .reasons
