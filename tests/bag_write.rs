@@ -93,6 +93,7 @@ fn write_sample_bag(path: &Path) -> sepmem::bag::BagSummary {
             }
             .into(),
             stop_reason: "converged".into(),
+            quality: SurfaceMesh::FITTED,
         };
         w.write("/sepmem/surface", t as u64 + 5_000_000, &surf)
             .unwrap();

@@ -56,8 +56,9 @@ impl TopicProcessor for TestProc {
                 warm: index > 0,
                 level: Level::Ok,
                 message: "ok".into(),
+                quality: None,
             }],
-            error: None,
+            ..FrameResult::default()
         }
     }
 
@@ -244,6 +245,16 @@ async fn stop(
         .unwrap()
 }
 
+/// The summary of one stream of a stopped node.
+fn stream_of(summary: &NodeSummary, topic: &str) -> sepmem::node::runtime::StreamSummary {
+    summary
+        .streams
+        .iter()
+        .find(|s| s.topic == topic)
+        .unwrap()
+        .clone()
+}
+
 fn any_type(name: &str) -> RosType {
     RosType::new(name, "x")
 }
@@ -323,14 +334,7 @@ async fn overload_keeps_newest_counts_drops_and_isolates_a_malformed_stream() {
     )
     .await;
     let summary = stop(stop_tx, node).await;
-    let get = |t: &str| {
-        summary
-            .streams
-            .iter()
-            .find(|s| s.topic == t)
-            .unwrap()
-            .clone()
-    };
+    let get = |t: &str| stream_of(&summary, t);
     let slow_s = get("/ovl/slow");
     let slow_seen: Vec<u64> = seen
         .lock()
@@ -549,4 +553,80 @@ async fn a_busy_stream_is_not_evicted_and_a_silent_one_is() {
         .unwrap();
     assert!(s.stale, "{s:?}");
     assert!(s.frames >= 3, "one processor saw every frame: {s:?}");
+}
+
+/// The stall guard and the compute share (issue 22): a stream whose one
+/// frame holds a compute thread for 2.5 s is reported ERROR while it does
+/// (and the node WARN); a stream whose frames cost 60 ms every 20 ms (three
+/// times a thread) is held to its 0.2-core share, its waiting frames counted
+/// as `over_budget` and reported WARN; a light stream keeps being processed.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stalled_or_greedy_stream_is_reported_and_the_others_keep_running() {
+    let (h, mut cfg) = harness("grd").await;
+    cfg.stall_after_ms = 300;
+    cfg.compute_share = Some(sepmem::node::budget::ComputeShareConfig {
+        cores: 0.2,
+        burst_ms: 100.0,
+    });
+    let seen: Arc<Mutex<Vec<(String, u64)>>> = Arc::default();
+    let backend = Arc::new(TestBackend { seen: seen.clone() });
+    let (stop_tx, node) = spawn_node(cfg, backend);
+    let (_dsub, diags) = collect(
+        &h,
+        "/diagnostics",
+        &any_type("diagnostic_msgs/msg/DiagnosticArray"),
+    )
+    .await;
+    let publ = |t: &'static str| {
+        let h = &h;
+        async move { h.publisher(t, &pc2(), Qos::SENSOR_DATA).await.unwrap() }
+    };
+    let (stuck, greedy, light) = (
+        publ("/grd/stuck").await,
+        publ("/grd/greedy").await,
+        publ("/grd/light").await,
+    );
+    let count = |t: &str| seen.lock().unwrap().iter().filter(|(s, _)| s == t).count();
+    probe(&light, || count("/grd/light") > 0, || payload(0, 0)).await;
+    stuck.put(payload(1, 2500)).await.unwrap();
+    let mut sent_light = 0;
+    for i in 1..=100u64 {
+        greedy.put(payload(i, 60)).await.unwrap();
+        light.put(payload(i, 0)).await.unwrap();
+        sent_light += 1;
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let has = |needle: &str| {
+        diags
+            .lock()
+            .unwrap()
+            .iter()
+            .any(|r| String::from_utf8_lossy(&r.payload).contains(needle))
+    };
+    assert!(
+        has("grd: /grd/stuck|2|"),
+        "the stuck stream was not reported ERROR"
+    );
+    assert!(has("grd: node|1|"), "the node was not reported WARN");
+    wait_for(
+        || has("grd: /grd/greedy|1|"),
+        "the greedy stream reported WARN",
+    )
+    .await;
+    let processed_light = count("/grd/light") - 1;
+    let summary = stop(stop_tx, node).await;
+    let get = |t: &str| stream_of(&summary, t);
+    let greedy_s = get("/grd/greedy");
+    let over = greedy_s.reasons.get("over_budget").copied().unwrap_or(0);
+    // 100 frames of 60 ms in 2 s at 0.2 core: at most about 0.4 s + the
+    // 0.1 s burst of compute, i.e. 9 frames, plus the one running at the end.
+    assert!(greedy_s.frames <= 12, "{greedy_s:?}");
+    assert!(over >= 5, "{greedy_s:?}");
+    assert_eq!(summary.reasons.get("over_budget").copied(), Some(over));
+    // The light stream kept its rate (keep-latest may merge a few frames).
+    assert!(
+        processed_light * 10 >= sent_light * 8,
+        "{processed_light} of {sent_light}"
+    );
+    assert!(get("/grd/stuck").frames == 1);
 }

@@ -175,6 +175,7 @@ fn surface_mesh() -> SurfaceMesh {
         warm_start: true,
         start_reason: "previous_surface".into(),
         stop_reason: "converged".into(),
+        quality: SurfaceMesh::HELD,
     }
 }
 

@@ -3,24 +3,36 @@
 //! points each (a moving, slightly noisy ellipsoid surface per stream, at a
 //! different size per stream) for a duration; an observer receives the
 //! meshes. It reports publish→mesh-receipt latency percentiles (the cloud's
-//! header stamp is its publish time, same clock), frames, drops and the
-//! process's resident memory over time.
+//! header stamp is its publish time, same clock), frames, drops, the share
+//! of each stream's frames meshed and the process's resident memory over
+//! time.
+//!
+//! `--hostile` is the soak: the hostile streams of [`super::soak`]
+//! (poisoned clouds, a label bomb, label churn, oversized payloads,
+//! malformed CDR) publish next to the healthy ones, an observer watches
+//! `/diagnostics`, and the run fails unless every hostile stream was
+//! counted there under its own reason and the node stopped without a panic.
+//! Resident memory is the whole process's: node, observer and publishers.
 
 use super::replay::percentile;
+use super::soak;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use sepmem::cloud::{PointCloud, Vec3};
 use sepmem::config::Config;
 use sepmem::metrics::sample_surface;
 use sepmem::node::loopback::LoopbackNode;
-use sepmem::node::PipelineBackend;
+use sepmem::node::runtime::NodeSummary;
+use sepmem::node::{Backend, PipelineBackend};
 use sepmem::transport::attachment::now_ns;
 use sepmem::transport::liveliness::Qos;
 use sepmem::transport::RosType;
 use sepmem::wire::msgs::{Header, PointCloud2, SurfaceMesh, Time};
 use sepmem::wire::pointcloud2::encode_pointcloud2;
 use sepmem::wire::{self, RosMessage};
+use std::collections::BTreeMap;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -45,6 +57,10 @@ pub struct BenchNodeArgs {
     /// Resident-memory sampling period (s).
     #[arg(long, default_value_t = 10.0)]
     pub rss_every: f64,
+    /// Publish the hostile streams too (the soak); `wire.max_bytes` is 8 MiB
+    /// unless set.
+    #[arg(long)]
+    pub hostile: bool,
     /// Write the figures as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -109,12 +125,19 @@ fn set_stamp(cdr: &mut [u8], ns: i64) {
     cdr[8..12].copy_from_slice(&t.nanosec.to_le_bytes());
 }
 
-#[derive(Default)]
+#[derive(Default, Clone)]
 struct Receipts {
-    /// (receipt ns, latency ms, stream index)
-    meshes: Vec<(i64, f64, usize)>,
+    /// (receipt ns, latency ms, stream index, stamp ns, quality)
+    meshes: Vec<(i64, f64, usize, i64, u8)>,
     /// Membrane iterations of each received mesh (receipt ns, iterations).
     iterations: Vec<(i64, u32)>,
+}
+
+/// What the hostile streams are made from.
+struct Setup {
+    max_bytes: usize,
+    limit: usize,
+    healthy: Vec<u8>,
 }
 
 /// Run the benchmark.
@@ -122,7 +145,11 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
     if args.streams == 0 || args.rate <= 0.0 || args.points < 100 || args.duration <= 0.0 {
         bail!("need --streams ≥ 1, --rate > 0, --points ≥ 100, --duration > 0");
     }
-    let cfg = Config::load(args.config.as_deref(), &args.set)?;
+    let mut sets = args.set.clone();
+    if args.hostile && !sets.iter().any(|s| s.starts_with("wire.max_bytes")) {
+        sets.push("wire.max_bytes=8388608".into());
+    }
+    let cfg = Config::load(args.config.as_deref(), &sets)?;
     let mut node_cfg = cfg.node.clone();
     node_cfg.topics = vec!["/bench/**".into()];
     node_cfg.transport.node_name = "sepmem_bench".into();
@@ -136,6 +163,11 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
         payloads.push(stream_frames(s, args.points, frames_per_stream)?);
     }
     let backend = Arc::new(PipelineBackend::from_config(&cfg)?);
+    let hostile = args.hostile.then(|| Setup {
+        max_bytes: cfg.wire.max_bytes,
+        limit: backend.max_message_bytes().unwrap_or(cfg.wire.max_bytes),
+        healthy: payloads[0][0].clone(),
+    });
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
@@ -143,6 +175,10 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
     let args_rate = args.rate;
     rt.block_on(async move {
         let node = LoopbackNode::start(&node_cfg, backend).await?;
+        let diag = match hostile {
+            Some(_) => Some(soak::watch_diagnostics(&node, &node_cfg.outputs.diagnostics).await?),
+            None => None,
+        };
         let receipts: Arc<Mutex<Receipts>> = Arc::default();
         let r2 = receipts.clone();
         let _sub = node
@@ -161,13 +197,12 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
                         .and_then(|n| n.parse::<usize>().ok())
                         .unwrap_or(usize::MAX);
                     let lat = (s.received_ns - stamp) as f64 * 1e-6;
-                    let iterations = wire::decode::<SurfaceMesh>(&s.payload)
-                        .map(|m| m.iterations)
-                        .ok();
+                    let msg = wire::decode::<SurfaceMesh>(&s.payload).ok();
+                    let quality = msg.as_ref().map_or(u8::MAX, |m| m.quality);
                     if let Ok(mut r) = r2.lock() {
-                        r.meshes.push((s.received_ns, lat, idx));
-                        if let Some(it) = iterations {
-                            r.iterations.push((s.received_ns, it));
+                        r.meshes.push((s.received_ns, lat, idx, stamp, quality));
+                        if let Some(m) = msg {
+                            r.iterations.push((s.received_ns, m.iterations));
                         }
                     }
                 },
@@ -206,7 +241,9 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
         let t0 = now_ns();
         let end = t0 + (args.duration * 1e9) as i64;
         let measure_from = t0 + (args.warmup * 1e9) as i64;
-        let published = Arc::new(std::sync::atomic::AtomicU64::new(0));
+        let window = (measure_from, end);
+        let published: Arc<Vec<AtomicU64>> =
+            Arc::new((0..args.streams).map(|_| AtomicU64::new(0)).collect());
         let mut tasks = Vec::new();
         for (s, (p, frames)) in pubs.into_iter().zip(payloads).enumerate() {
             let published = published.clone();
@@ -221,119 +258,252 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
                 while now_ns() < end {
                     tick.tick().await;
                     let mut bytes = frames[k % frames.len()].clone();
-                    set_stamp(&mut bytes, now_ns());
-                    if p.put(bytes).await.is_ok() {
-                        published.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let stamp = now_ns();
+                    set_stamp(&mut bytes, stamp);
+                    if p.put(bytes).await.is_ok() && stamp >= measure_from {
+                        published[s].fetch_add(1, Ordering::Relaxed);
                     }
                     k += 1;
                 }
                 p
             }));
         }
-        let mut rss = vec![(0.0, rss_mib().unwrap_or(f64::NAN))];
-        let every = Duration::from_secs_f64(args.rss_every.max(0.5));
-        while now_ns() < end {
-            tokio::time::sleep(every.min(Duration::from_nanos(
-                u64::try_from(end - now_ns()).unwrap_or(0).max(1),
-            )))
-            .await;
-            let t = (now_ns() - t0) as f64 * 1e-9;
-            let m = rss_mib().unwrap_or(f64::NAN);
-            let n = receipts.lock().map(|r| r.meshes.len()).unwrap_or(0);
-            println!("  t={t:6.1} s  rss {m:7.1} MiB  meshes received {n}");
-            rss.push((t, m));
-        }
+        let hostile_tasks = match &hostile {
+            Some(h) => soak::spawn(&node, soak::streams(h.max_bytes, h.limit, h.healthy.clone())?, end).await?,
+            None => Vec::new(),
+        };
+        let rss = sample_rss(t0, end, args.rss_every, &receipts).await;
         let mut pubs = Vec::new();
         for t in tasks {
             pubs.push(t.await?);
+        }
+        let mut sent = BTreeMap::new();
+        for (name, t) in hostile_tasks {
+            let (p, n) = t.await?;
+            sent.insert(name, n);
+            pubs.push(p);
         }
         tokio::time::sleep(Duration::from_millis(1500)).await;
         for p in pubs {
             p.undeclare().await?;
         }
         let summary = node.stop().await?;
-        let (r, its) = receipts
-            .lock()
-            .map(|r| (r.meshes.clone(), r.iterations.clone()))
-            .unwrap_or_default();
-        // Membrane iterations per mesh after warm-up: how much of the
-        // per-frame budget went into evolving rather than fixed costs.
-        let its: Vec<u32> = its
-            .iter()
-            .filter(|(t, _)| *t >= measure_from)
-            .map(|(_, i)| *i)
-            .collect();
-        let it_mean = its.iter().map(|&i| f64::from(i)).sum::<f64>() / its.len().max(1) as f64;
-        let it_zero = 100.0 * its.iter().filter(|&&i| i == 0).count() as f64 / its.len().max(1) as f64;
-        let mut lat: Vec<f64> = r
-            .iter()
-            .filter(|(t, _, _)| *t >= measure_from)
-            .map(|(_, l, _)| *l)
-            .collect();
-        lat.sort_by(f64::total_cmp);
-        let published = published.load(std::sync::atomic::Ordering::Relaxed);
-        let frames: u64 = summary.streams.iter().map(|s| s.frames).sum();
-        let drops: u64 = summary.streams.iter().map(|s| s.drops).sum();
-        let late: u64 = summary.streams.iter().map(|s| s.late).sum();
-        let received: u64 = summary.streams.iter().map(|s| s.received).sum();
-        println!(
-            "\n{:<22} {:>9} {:>7} {:>7} {:>6} {:>6} {:>6} {:>8} {:>8}",
-            "stream", "received", "frames", "drops", "late", "warm", "cold", "p50 ms", "p95 ms"
-        );
-        let ms = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |x| format!("{:.1}", x * 1e3));
-        for s in &summary.streams {
-            println!(
-                "{:<22} {:>9} {:>7} {:>7} {:>6} {:>6} {:>6} {:>8} {:>8}",
-                s.topic,
-                s.received,
-                s.frames,
-                s.drops,
-                s.late,
-                s.warm,
-                s.cold,
-                ms(s.p50_s),
-                ms(s.p95_s)
-            );
-        }
-        let rss_first = rss.get(1).map_or(f64::NAN, |x| x.1);
-        let rss_last = rss.last().map_or(f64::NAN, |x| x.1);
-        let rss_max = rss.iter().map(|x| x.1).fold(f64::NAN, f64::max);
-        let p50 = percentile(&lat, 0.5);
-        let p95 = percentile(&lat, 0.95);
-        let p99 = percentile(&lat, 0.99);
-        let mesh_rate = lat.len() as f64 / (args.duration - args.warmup).max(1e-9);
-        println!(
-            "\nsummary: published {published}, received by the node {received}, processed {frames}, dropped (keep-latest) {drops} ({:.1} %), late {late}; meshes received {} ({mesh_rate:.1}/s after warm-up)",
-            100.0 * drops as f64 / received.max(1) as f64,
-            r.len()
-        );
-        println!(
-            "publish→mesh-receipt latency ms (after warm-up, {} meshes): p50 {p50:.1} p95 {p95:.1} p99 {p99:.1} max {:.1}",
-            lat.len(),
-            lat.last().copied().unwrap_or(f64::NAN)
-        );
-        println!(
-            "membrane iterations per mesh (after warm-up): mean {it_mean:.2}, none {it_zero:.1} %"
-        );
-        println!(
-            "resident memory MiB: start {:.1}, after first period {rss_first:.1}, end {rss_last:.1}, max {rss_max:.1}",
-            rss[0].1
-        );
+        let seen = diag.as_ref().map(|(_, d)| d.lock().map(|d| d.clone()).unwrap_or_default());
+        let r = receipts.lock().map(|r| Receipts { meshes: r.meshes.clone(), iterations: r.iterations.clone() }).unwrap_or_default();
+        let published: Vec<u64> = published.iter().map(|p| p.load(Ordering::Relaxed)).collect();
+        let figures = report(args, &cfg, &summary, &r, &published, window, &rss);
+        let verdict = seen.map(|d| hostile_verdict(&d, &sent));
         if let Some(path) = &args.json {
-            let j = serde_json::json!({
-                "streams": args.streams, "rate_hz": args_rate, "points": args.points,
-                "duration_s": args.duration, "warmup_s": args.warmup,
-                "deadline_ms": cfg.pipeline.deadline_ms,
-                "published": published, "received": received, "processed": frames,
-                "drops": drops, "late": late, "meshes": r.len(),
-                "latency_ms": {"p50": p50, "p95": p95, "p99": p99, "n": lat.len()},
-                "iterations_per_mesh": {"mean": it_mean, "none_percent": it_zero},
-                "rss_mib": rss.iter().map(|(t, m)| serde_json::json!([t, m])).collect::<Vec<_>>(),
-                "clean_shutdown": summary.clean_shutdown,
-            });
+            let mut j = figures;
+            if let Some((v, _)) = &verdict {
+                j["hostile"] = v.clone();
+            }
             std::fs::write(path, serde_json::to_string_pretty(&j)?)
                 .with_context(|| format!("writing {}", path.display()))?;
         }
+        if let Some((_, Err(e))) = verdict {
+            bail!("{e}");
+        }
         anyhow::Ok(())
     })
+}
+
+/// Sample the process's resident memory every `every_s` until `end`.
+async fn sample_rss(
+    t0: i64,
+    end: i64,
+    every_s: f64,
+    receipts: &Mutex<Receipts>,
+) -> Vec<(f64, f64)> {
+    let mut rss = vec![(0.0, rss_mib().unwrap_or(f64::NAN))];
+    let every = Duration::from_secs_f64(every_s.max(0.5));
+    while now_ns() < end {
+        tokio::time::sleep(every.min(Duration::from_nanos(
+            u64::try_from(end - now_ns()).unwrap_or(0).max(1),
+        )))
+        .await;
+        let t = (now_ns() - t0) as f64 * 1e-9;
+        let m = rss_mib().unwrap_or(f64::NAN);
+        let n = receipts.lock().map(|r| r.meshes.len()).unwrap_or(0);
+        println!("  t={t:6.1} s  rss {m:7.1} MiB  meshes received {n}");
+        rss.push((t, m));
+    }
+    rss
+}
+
+/// Per healthy stream: frames published in the measurement window and the
+/// share of them whose mesh was received (any quality) and fitted.
+fn meshed_shares(
+    r: &Receipts,
+    published: &[u64],
+    (from, end): (i64, i64),
+) -> Vec<serde_json::Value> {
+    published
+        .iter()
+        .enumerate()
+        .map(|(i, &n)| {
+            let mine = r.meshes.iter().filter(|m| m.2 == i && m.3 >= from && m.3 < end);
+            let (all, fitted) = mine.fold((0u64, 0u64), |(a, f), m| (a + 1, f + u64::from(m.4 == SurfaceMesh::FITTED)));
+            let share = |k: u64| k as f64 / n.max(1) as f64;
+            serde_json::json!({"stream": i, "published": n, "meshed": share(all), "fitted": share(fitted)})
+        })
+        .collect()
+}
+
+/// Print the figures; return them as JSON.
+fn report(
+    args: &BenchNodeArgs,
+    cfg: &Config,
+    summary: &NodeSummary,
+    r: &Receipts,
+    published: &[u64],
+    (measure_from, end): (i64, i64),
+    rss: &[(f64, f64)],
+) -> serde_json::Value {
+    // Membrane iterations per mesh after warm-up: how much of the
+    // per-frame budget went into evolving rather than fixed costs.
+    let healthy = |m: &&(i64, f64, usize, i64, u8)| m.0 >= measure_from && m.2 < args.streams;
+    let its: Vec<u32> = r
+        .iterations
+        .iter()
+        .filter(|(t, _)| *t >= measure_from)
+        .map(|(_, i)| *i)
+        .collect();
+    let it_mean = its.iter().map(|&i| f64::from(i)).sum::<f64>() / its.len().max(1) as f64;
+    let it_zero = 100.0 * its.iter().filter(|&&i| i == 0).count() as f64 / its.len().max(1) as f64;
+    let mut lat: Vec<f64> = r.meshes.iter().filter(healthy).map(|m| m.1).collect();
+    lat.sort_by(f64::total_cmp);
+    let total: u64 = published.iter().sum();
+    let frames: u64 = summary.streams.iter().map(|s| s.frames).sum();
+    let drops: u64 = summary.streams.iter().map(|s| s.drops).sum();
+    let late: u64 = summary.streams.iter().map(|s| s.late).sum();
+    let received: u64 = summary.streams.iter().map(|s| s.received).sum();
+    println!(
+        "\n{:<32} {:>9} {:>7} {:>7} {:>6} {:>6} {:>6} {:>8} {:>8}",
+        "stream", "received", "frames", "drops", "late", "warm", "cold", "p50 ms", "p95 ms"
+    );
+    let ms = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |x| format!("{:.1}", x * 1e3));
+    for s in &summary.streams {
+        println!(
+            "{:<32} {:>9} {:>7} {:>7} {:>6} {:>6} {:>6} {:>8} {:>8}",
+            s.topic,
+            s.received,
+            s.frames,
+            s.drops,
+            s.late,
+            s.warm,
+            s.cold,
+            ms(s.p50_s),
+            ms(s.p95_s)
+        );
+    }
+    let shares = meshed_shares(r, published, (measure_from, end));
+    for s in &shares {
+        println!(
+            "healthy stream {}: published {} after warm-up, meshed {:.1} %, fitted {:.1} %",
+            s["stream"],
+            s["published"],
+            100.0 * s["meshed"].as_f64().unwrap_or(0.0),
+            100.0 * s["fitted"].as_f64().unwrap_or(0.0)
+        );
+    }
+    let rss_at = |t: f64| {
+        rss.iter()
+            .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()))
+            .map_or(f64::NAN, |x| x.1)
+    };
+    let ref_t = 300f64.min(args.duration / 2.0);
+    let (rss_ref, rss_last) = (rss_at(ref_t), rss.last().map_or(f64::NAN, |x| x.1));
+    let rss_max = rss.iter().map(|x| x.1).fold(f64::NAN, f64::max);
+    let (p50, p95, p99) = (
+        percentile(&lat, 0.5),
+        percentile(&lat, 0.95),
+        percentile(&lat, 0.99),
+    );
+    let mesh_rate = lat.len() as f64 / (args.duration - args.warmup).max(1e-9);
+    println!(
+        "\nsummary: published (healthy, after warm-up) {total}, received by the node {received}, processed {frames}, dropped (keep-latest) {drops} ({:.1} %), late {late}; healthy meshes after warm-up {} ({mesh_rate:.1}/s)",
+        100.0 * drops as f64 / received.max(1) as f64,
+        lat.len()
+    );
+    println!(
+        "publish→mesh-receipt latency ms (healthy, after warm-up, {} meshes): p50 {p50:.1} p95 {p95:.1} p99 {p99:.1} max {:.1}",
+        lat.len(),
+        lat.last().copied().unwrap_or(f64::NAN)
+    );
+    println!(
+        "membrane iterations per mesh (after warm-up): mean {it_mean:.2}, none {it_zero:.1} %"
+    );
+    println!(
+        "resident memory MiB: start {:.1}, at {ref_t:.0} s {rss_ref:.1}, end {rss_last:.1} ({:+.1} %), max {rss_max:.1}",
+        rss[0].1,
+        100.0 * (rss_last / rss_ref - 1.0)
+    );
+    println!("reasons (all streams): {:?}", summary.reasons);
+    serde_json::json!({
+        "streams": args.streams, "rate_hz": args.rate, "points": args.points,
+        "duration_s": args.duration, "warmup_s": args.warmup,
+        "deadline_ms": cfg.pipeline.deadline_ms,
+        "published": total, "received": received, "processed": frames,
+        "drops": drops, "late": late, "meshes": lat.len(),
+        "latency_ms": {"p50": p50, "p95": p95, "p99": p99, "n": lat.len()},
+        "healthy": shares,
+        "iterations_per_mesh": {"mean": it_mean, "none_percent": it_zero},
+        "rss_mib": rss.iter().map(|(t, m)| serde_json::json!([t, m])).collect::<Vec<_>>(),
+        "rss_ref": {"t_s": ref_t, "mib": rss_ref}, "rss_end_mib": rss_last,
+        "reasons": summary.reasons,
+        "clean_shutdown": summary.clean_shutdown,
+    })
+}
+
+/// Whether every hostile stream was counted in `/diagnostics` under its own
+/// reason (the node status's totals), as JSON and as a pass/fail.
+fn hostile_verdict(
+    seen: &soak::DiagSeen,
+    sent: &BTreeMap<&'static str, u64>,
+) -> (serde_json::Value, Result<(), String>) {
+    let count = |r: &str| {
+        seen.node_values
+            .get(r)
+            .and_then(|v| v.parse::<u64>().ok())
+            .unwrap_or(0)
+    };
+    let mut missing = Vec::new();
+    let mut kinds = serde_json::Map::new();
+    for (name, reason) in soak::KINDS {
+        let worst = seen.worst.get(&soak::topic(name));
+        // A frame that never finishes (a decoder defect) cannot be counted
+        // under its reason; the stall guard reports it ERROR "stalled".
+        let stalled = worst.is_some_and(|(l, m)| *l == 2 && m.starts_with("stalled"));
+        let n = count(reason);
+        println!(
+            "hostile {name:<10} sent {:>6}  counted under {reason} {n:>7}  worst /diagnostics level {}",
+            sent.get(name).copied().unwrap_or(0),
+            worst.map_or_else(|| "-".to_string(), |(l, m)| format!("{l} ({m})"))
+        );
+        if n == 0 && !stalled {
+            missing.push(format!("{name} (no {reason})"));
+        }
+        kinds.insert(name.to_string(), serde_json::json!({"sent": sent.get(name), "reason": reason, "count": n, "stalled": stalled, "worst": worst}));
+    }
+    println!(
+        "/diagnostics: {} arrays, largest {} bytes, most statuses {}; node values {:?}",
+        seen.arrays, seen.max_bytes, seen.max_statuses, seen.node_values
+    );
+    let j = serde_json::json!({
+        "kinds": kinds, "diagnostics_arrays": seen.arrays,
+        "diagnostics_max_bytes": seen.max_bytes, "diagnostics_max_statuses": seen.max_statuses,
+        "node_values": seen.node_values,
+    });
+    let ok = if !missing.is_empty() {
+        Err(format!(
+            "hostile streams not counted in /diagnostics: {}",
+            missing.join(", ")
+        ))
+    } else if seen.arrays == 0 {
+        Err("no /diagnostics array was received".into())
+    } else {
+        Ok(())
+    };
+    (j, ok)
 }

@@ -199,8 +199,8 @@ fn write_outputs(
     let mut frames = 0;
     let mut index: HashMap<String, usize> = HashMap::new();
     println!(
-        "{:<34} {:>5} {:>6} {:<5} {:>4} {:>6} {:>9}",
-        "stream", "frame", "verts", "path", "it", "eta_g", "latency"
+        "{:<34} {:>5} {:>6} {:<5} {:>4} {:>6} {:<11} {:>9}",
+        "stream", "frame", "verts", "path", "it", "eta_g", "quality", "latency"
     );
     for (type_name, inbox) in &observed.inboxes {
         let samples = std::mem::take(&mut *inbox_lock(inbox));
@@ -237,13 +237,14 @@ fn write_outputs(
             );
             sepmem::io::save_mesh(dir.join("meshes").join(file), &mesh)?;
             println!(
-                "{:<34} {:>5} {:>6} {:<5} {:>4} {:>6.3} {:>9}",
+                "{:<34} {:>5} {:>6} {:<5} {:>4} {:>6.3} {:<11} {:>9}",
                 msg.stream_id,
                 k,
                 msg.vertices.len(),
                 if msg.warm_start { "warm" } else { "cold" },
                 msg.iterations,
                 msg.global_separability,
+                quality_name(msg.quality),
                 latency.map_or_else(|| "-".to_string(), |l| format!("{l:.1} ms"))
             );
             *k += 1;
@@ -258,4 +259,15 @@ fn write_outputs(
         s.counts.len()
     );
     Ok(frames)
+}
+
+/// The name of a `SurfaceMesh.quality` value, for the table.
+fn quality_name(q: u8) -> &'static str {
+    match q {
+        SurfaceMesh::FITTED => "fitted",
+        SurfaceMesh::UNCONVERGED => "UNCONVERGED",
+        SurfaceMesh::UNFITTED => "UNFITTED",
+        SurfaceMesh::HELD => "held",
+        _ => "?",
+    }
 }

@@ -9,4 +9,5 @@ pub mod filter;
 pub mod node;
 pub mod reconstruct;
 pub mod replay;
+pub mod soak;
 pub mod synth;

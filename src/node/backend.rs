@@ -74,6 +74,9 @@ pub struct ObjectReport {
     pub level: Level,
     /// Short human-readable summary (stop reason, why cold …).
     pub message: String,
+    /// Verdict on the published surface (e.g. `fitted`, `held`), if the
+    /// backend gives one.
+    pub quality: Option<&'static str>,
 }
 
 /// The result of processing one frame.
@@ -86,6 +89,14 @@ pub struct FrameResult {
     /// Why the frame failed (malformed input, degenerate cloud …); the
     /// stream continues with the next frame.
     pub error: Option<String>,
+    /// What this frame refused or discarded, by reason (see
+    /// [`super::reasons`]): e.g. `("objects_skipped", 384)` for a label bomb
+    /// over the per-frame cap, `("malformed_cdr", 1)` for undecodable bytes.
+    /// The node adds them up per stream and reports them in `/diagnostics`.
+    pub counts: Vec<(&'static str, u64)>,
+    /// Object streams (`topic#label`) whose state the processor freed in
+    /// this frame (silent labels); the node forgets their statuses.
+    pub evicted: Vec<String>,
 }
 
 /// Per-input-topic processing state (the trackers of its objects).
@@ -124,6 +135,16 @@ pub trait Backend: Send + Sync + 'static {
     fn diagnostics_type(&self) -> RosType;
     /// Per-frame deadline, measured from receipt (`None`: no deadline).
     fn frame_deadline(&self) -> Option<Duration> {
+        None
+    }
+    /// The longest compute budget of one frame (e.g. a cold start's; `None`:
+    /// the frame deadline). The stall bound is counted from it.
+    fn frame_budget(&self) -> Option<Duration> {
+        self.frame_deadline()
+    }
+    /// The largest input message the backend accepts (bytes), which the
+    /// node sets as zenoh's receive limit (`None`: zenoh's default).
+    fn max_message_bytes(&self) -> Option<usize> {
         None
     }
     /// A fresh processor for a newly seen input topic.

@@ -11,11 +11,13 @@
 //! [`shard`]. See [`runtime`] for the task structure and shutdown.
 
 pub mod backend;
+pub mod budget;
 #[cfg(feature = "zenoh")]
 pub mod loopback;
 pub mod pipeline_backend;
 #[cfg(feature = "zenoh")]
 pub mod player;
+pub mod reasons;
 #[cfg(feature = "ros2")]
 pub mod ros2;
 #[cfg(feature = "zenoh")]
@@ -102,6 +104,11 @@ pub struct NodeConfig {
     pub max_streams: usize,
     /// Compute threads (0 = one per core).
     pub compute_threads: usize,
+    /// How much of the compute pool one stream may use (`None`: no limit).
+    pub compute_share: Option<budget::ComputeShareConfig>,
+    /// A frame in compute for longer than the cold-start budget plus this
+    /// (ms) is reported stalled (ERROR).
+    pub stall_after_ms: u64,
     /// Bound on graceful shutdown (in-flight frames are abandoned after it).
     pub shutdown_timeout_ms: u64,
     /// This instance's shard of the streams.
@@ -160,6 +167,9 @@ impl NodeConfig {
         }
         if self.max_streams == 0 {
             return Err(NodeError::Config("node.max_streams must be > 0".into()));
+        }
+        if let Some(share) = &self.compute_share {
+            share.validate().map_err(NodeError::Config)?;
         }
         Ok(())
     }

@@ -12,17 +12,22 @@
 use super::backend::{
     Backend, Frame, FrameResult, ObjectReport, Output, OutputKind, StatusEntry, TopicProcessor,
 };
+use super::reasons;
 use super::stats::Level;
 use crate::membrane::{ConfigError, MembraneConfig, StopReason};
-use crate::pipeline::engine::Engine;
-use crate::pipeline::{outputs, Deadlines, Membranes, PipelineConfig, StartPath};
+use crate::pipeline::engine::{decode_sample, DecodedSample, StreamCloud};
+use crate::pipeline::objects::{cap_objects, Entry, ObjectBook, Quality};
+use crate::pipeline::{
+    outputs, Deadlines, FrameResult as PipelineResult, Membranes, PipelineConfig, StartPath,
+};
 use crate::transport::RosType;
 use crate::wire::msgs::{
-    DiagnosticArray, DiagnosticStatus, FrameDiagnostics, Header, KeyValue, MarkerArray,
+    DiagnosticArray, DiagnosticStatus, FrameDiagnostics, Header, KeyValue, Marker, MarkerArray,
     PointCloud2, SurfaceMesh, Time,
 };
 use crate::wire::pointcloud2::WireConfig;
 use crate::wire::{self, RosMessage};
+use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
 fn ty<M: RosMessage>() -> RosType {
@@ -64,7 +69,10 @@ impl PipelineBackend {
 }
 
 struct EngineProcessor {
-    engine: Engine,
+    membranes: Membranes,
+    pipeline: PipelineConfig,
+    limits: WireConfig,
+    objects: ObjectBook,
     ns: String,
     last_header: Header,
 }
@@ -84,83 +92,149 @@ fn node_deadlines(p: &PipelineConfig, deadline: Instant) -> Deadlines {
     Deadlines::after(now, left, p.cold_budget_ms() - (p.deadline_ms - left))
 }
 
-/// The node's per-object report of a frame result.
-fn object_report(r: &crate::pipeline::FrameResult) -> ObjectReport {
-    let rep = &r.reconstruction.report;
-    let warm = r.path == StartPath::Warm;
-    let level = if rep.stop == StopReason::Deadline {
-        Level::Warn
-    } else {
-        Level::Ok
-    };
-    ObjectReport {
-        stream: r.stream.to_string(),
-        eta_g: rep.eta_final,
-        iterations: u32::try_from(r.iterations).unwrap_or(u32::MAX),
-        warm,
-        level,
-        message: format!(
-            "{} start ({}), stop: {}",
-            if warm { "warm" } else { "cold" },
-            r.reason,
-            rep.stop
-        ),
+/// What a frame's objects produced so far.
+#[derive(Default)]
+struct FrameOut {
+    outputs: Vec<Output>,
+    markers: Vec<Marker>,
+    objects: Vec<ObjectReport>,
+    errors: Vec<String>,
+    counts: Vec<(&'static str, u64)>,
+}
+
+impl FrameOut {
+    fn encode<M: RosMessage>(&mut self, kind: OutputKind, msg: &M) {
+        match wire::encode(msg) {
+            Ok(payload) => self.outputs.push(Output { kind, payload }),
+            Err(e) => {
+                self.errors.push(format!("encoding {}: {e}", M::TYPE_NAME));
+                reasons::bump(&mut self.counts, reasons::OUTPUTS_FAILED, 1);
+            }
+        }
     }
 }
 
-fn encode<M: RosMessage>(
-    kind: OutputKind,
-    msg: &M,
-    out: &mut Vec<Output>,
-    errors: &mut Vec<String>,
-) {
-    match wire::encode(msg) {
-        Ok(payload) => out.push(Output { kind, payload }),
-        Err(e) => errors.push(format!("encoding {}: {e}", M::TYPE_NAME)),
+impl EngineProcessor {
+    /// The outputs of one evolved object: its verdict decides whether this
+    /// frame's mesh or the object's last fitted one is published
+    /// ([`crate::pipeline::objects`]).
+    fn emit(
+        &self,
+        entry: &mut Entry,
+        r: &PipelineResult,
+        sample: &DecodedSample,
+        out: &mut FrameOut,
+    ) {
+        let rep = &r.reconstruction.report;
+        let verdict = entry.verdict(r, &self.pipeline.objects);
+        let (mesh, marker, shown) = entry.publish(
+            verdict,
+            outputs::surface_mesh(r, &sample.header),
+            outputs::separability_marker(r, &sample.header, &self.ns),
+        );
+        out.encode(OutputKind::Mesh, &mesh);
+        out.encode(
+            OutputKind::FrameDiagnostics,
+            &outputs::frame_diagnostics(r, &sample.header, sample.points_in, sample.dropped),
+        );
+        out.markers.push(marker);
+        if !verdict.is_fitted() {
+            reasons::bump(&mut out.counts, reasons::UNFITTED, 1);
+        }
+        let warm = r.path == StartPath::Warm;
+        let level = if rep.stop == StopReason::Deadline || !verdict.is_fitted() {
+            Level::Warn
+        } else {
+            Level::Ok
+        };
+        let shown_note = if shown == Quality::Held {
+            "; showing the last fitted mesh"
+        } else {
+            ""
+        };
+        out.objects.push(ObjectReport {
+            stream: r.stream.to_string(),
+            eta_g: rep.eta_final,
+            iterations: u32::try_from(r.iterations).unwrap_or(u32::MAX),
+            warm,
+            level,
+            message: format!(
+                "{} start ({}), stop: {}, surface {}{shown_note}",
+                if warm { "warm" } else { "cold" },
+                r.reason,
+                rep.stop,
+                verdict.as_str(),
+            ),
+            quality: Some(shown.as_str()),
+        });
     }
 }
 
 impl TopicProcessor for EngineProcessor {
     fn process(&mut self, frame: &Frame) -> FrameResult {
-        // The node's deadline runs from receipt; the objects of a labelled
-        // cloud are evolved in parallel, each with what is left of it.
-        let deadlines = node_deadlines(&self.engine.pipeline, frame.deadline);
-        let out = match self
-            .engine
-            .handle(&frame.topic, &frame.payload, Some(deadlines))
-        {
-            Ok(o) => o,
-            Err(e) => {
-                return FrameResult {
-                    error: Some(e.to_string()),
-                    ..FrameResult::default()
+        let mut out = FrameOut::default();
+        let mut sample =
+            match decode_sample(&frame.topic, &frame.payload, &self.limits, &self.pipeline) {
+                Ok(s) => s,
+                Err(e) => {
+                    reasons::bump(&mut out.counts, reasons::of_sample_error(&e), 1);
+                    return FrameResult {
+                        error: Some(e.to_string()),
+                        counts: out.counts,
+                        ..FrameResult::default()
+                    };
+                }
+            };
+        self.last_header = sample.header.clone();
+        let mut streams = std::mem::take(&mut sample.streams);
+        let skipped = cap_objects(&mut streams, self.pipeline.objects.max_per_frame);
+        reasons::bump(&mut out.counts, reasons::OBJECTS_SKIPPED, skipped as u64);
+        // The node's deadline runs from receipt; every object of a labelled
+        // cloud shares it, however many compute waves the objects take.
+        let deadlines = node_deadlines(&self.pipeline, frame.deadline);
+        let mut work: Vec<(Entry, StreamCloud)> = streams
+            .into_iter()
+            .map(|s| (self.objects.checkout(&s.key), s))
+            .collect();
+        let (membranes, pipeline) = (&self.membranes, &self.pipeline);
+        let outcomes: Vec<_> = work
+            .par_iter_mut()
+            .map(|(e, s)| {
+                e.tracker
+                    .process_by(&s.cloud, membranes, pipeline, deadlines)
+            })
+            .collect();
+        for ((mut entry, _), outcome) in work.into_iter().zip(outcomes) {
+            match outcome {
+                Ok(r) => self.emit(&mut entry, &r, &sample, &mut out),
+                Err(e) => {
+                    reasons::bump(&mut out.counts, reasons::OBJECT_ERRORS, 1);
+                    out.errors.push(e.to_string());
                 }
             }
-        };
-        self.last_header = out.sample.header.clone();
-        let msgs = out.messages(&self.ns);
-        let mut outs = Vec::with_capacity(2 * msgs.objects.len() + 1);
-        let mut errors = Vec::new();
-        for (mesh, diag) in &msgs.objects {
-            encode(OutputKind::Mesh, mesh, &mut outs, &mut errors);
-            encode(OutputKind::FrameDiagnostics, diag, &mut outs, &mut errors);
+            self.objects.checkin(entry, frame.received_ns);
         }
-        encode(OutputKind::Markers, &msgs.markers, &mut outs, &mut errors);
-        let mut objects = Vec::with_capacity(out.processed.len());
-        for p in &out.processed {
-            match &p.outcome {
-                Ok(r) => objects.push(object_report(r)),
-                Err(e) => errors.push(e.to_string()),
-            }
-        }
+        let evicted = self
+            .objects
+            .evict(frame.received_ns, &self.pipeline.objects);
+        reasons::bump(
+            &mut out.counts,
+            reasons::LABELS_EVICTED,
+            evicted.len() as u64,
+        );
+        let markers =
+            outputs::cleared_markers(std::mem::take(&mut out.markers), &sample.header, &self.ns);
+        out.encode(OutputKind::Markers, &markers);
         FrameResult {
-            outputs: outs,
-            objects,
-            error: if errors.is_empty() {
+            outputs: out.outputs,
+            objects: out.objects,
+            error: if out.errors.is_empty() {
                 None
             } else {
-                Some(errors.join("; "))
+                Some(out.errors.join("; "))
             },
+            counts: out.counts,
+            evicted: evicted.iter().map(ToString::to_string).collect(),
         }
     }
 
@@ -199,13 +273,23 @@ impl Backend for PipelineBackend {
             .then(|| Duration::from_secs_f64(self.pipeline.deadline_ms / 1e3))
     }
 
+    fn max_message_bytes(&self) -> Option<usize> {
+        // What `decode_pointcloud2_cdr` accepts (data plus 64 KiB of header
+        // and fields), plus 4 KiB of zenoh framing (key, attachment).
+        Some(self.limits.max_bytes.saturating_add((1 << 16) + 4096))
+    }
+
+    fn frame_budget(&self) -> Option<Duration> {
+        (self.pipeline.deadline_ms > 0.0)
+            .then(|| Duration::from_secs_f64(self.pipeline.cold_budget_ms() / 1e3))
+    }
+
     fn processor(&self, _topic: &str) -> Box<dyn TopicProcessor> {
         Box::new(EngineProcessor {
-            engine: Engine::with_membranes(
-                self.membranes.clone(),
-                self.pipeline.clone(),
-                self.limits.clone(),
-            ),
+            membranes: self.membranes.clone(),
+            pipeline: self.pipeline.clone(),
+            limits: self.limits.clone(),
+            objects: ObjectBook::default(),
             ns: self.pipeline.marker_namespace.clone(),
             last_header: Header::default(),
         })

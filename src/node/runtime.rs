@@ -11,6 +11,14 @@
 //! * The manager task spawns stream tasks, publishes `/diagnostics` every
 //!   `diagnostics_period_ms`, and evicts streams silent for
 //!   `evict_after_ms` (their state is freed and they are reported STALE).
+//! * Each stream's frames are charged to its compute share
+//!   ([`super::budget`]): a stream in debt gets no compute until it earned it
+//!   back (its frames are counted `over_budget`), and a frame in compute
+//!   for longer than the cold budget plus `stall_after_ms` is reported
+//!   stalled. What a frame refused is counted per reason
+//!   ([`super::reasons`]); `/diagnostics` holds at most one status per
+//!   tracked object (bounded by `pipeline.objects.max_tracked`) with
+//!   messages cut to [`MAX_MESSAGE`] bytes.
 //! * On shutdown the slots are closed, in-flight frames get
 //!   `shutdown_timeout_ms` to finish (then are abandoned), processors emit
 //!   their final outputs (DELETEALL markers), a final `/diagnostics` is
@@ -18,16 +26,19 @@
 //!   closes.
 
 use super::backend::{Backend, Frame, ObjectReport, OutputKind, StatusEntry, TopicProcessor};
+use super::budget::ShareMeter;
+use super::reasons;
 use super::slot::LatestSlot;
 use super::stats::{LatencyWindow, Level};
 use super::{NodeConfig, NodeError};
 use crate::transport::attachment::now_ns;
 use crate::transport::keys::expand_topic_template;
 use crate::transport::liveliness::{EntityKind, Qos};
+use crate::transport::session::EntityToken;
 use crate::transport::{Participant, Received, RosPublisher};
 use std::collections::{BTreeMap, HashMap};
 use std::future::Future;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, oneshot, watch};
@@ -38,6 +49,22 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
         Ok(g) => g,
         Err(p) => p.into_inner(),
     }
+}
+
+/// Longest status message in `/diagnostics` (bytes); longer ones are cut.
+pub const MAX_MESSAGE: usize = 240;
+
+/// `s` cut to at most [`MAX_MESSAGE`] bytes at a character boundary.
+fn bounded(mut s: String) -> String {
+    if s.len() > MAX_MESSAGE {
+        let mut end = MAX_MESSAGE - 3;
+        while !s.is_char_boundary(end) {
+            end -= 1;
+        }
+        s.truncate(end);
+        s.push_str("...");
+    }
+    s
 }
 
 /// Per-object counters.
@@ -64,6 +91,15 @@ struct StreamStats {
     received: u64,
     reported_drops: u64,
     reported_late: u64,
+    /// What the stream's frames refused or discarded, by reason.
+    reasons: BTreeMap<&'static str, u64>,
+    reported_over_budget: u64,
+}
+
+impl StreamStats {
+    fn count(&self, reason: &str) -> u64 {
+        self.reasons.get(reason).copied().unwrap_or(0)
+    }
 }
 
 struct Stream {
@@ -71,6 +107,8 @@ struct Stream {
     stats: Arc<Mutex<StreamStats>>,
     /// A frame of this stream is being processed (never evicted then).
     busy: AtomicBool,
+    /// When the frame now in compute started computing (ns; 0 = none).
+    computing_since_ns: AtomicI64,
 }
 
 /// Counters of samples that never reached a stream.
@@ -87,6 +125,10 @@ struct Shared {
     new_tx: mpsc::Sender<String>,
     ignored: Ignored,
     cfg: NodeConfig,
+    /// A frame in compute longer than this (ns) is stalled.
+    stall_ns: i64,
+    /// Reason counts of streams that were forgotten (so node totals keep them).
+    retired: Mutex<BTreeMap<&'static str, u64>>,
 }
 
 /// Final figures of one stream.
@@ -114,6 +156,8 @@ pub struct StreamSummary {
     pub p95_s: Option<f64>,
     /// Whether the stream was evicted (STALE) at the end.
     pub stale: bool,
+    /// What the stream's frames refused or discarded, by reason.
+    pub reasons: BTreeMap<String, u64>,
 }
 
 /// What the node did, returned when it stops.
@@ -131,6 +175,8 @@ pub struct NodeSummary {
     pub bad_attachments: u64,
     /// Whether every in-flight frame finished within the shutdown bound.
     pub clean_shutdown: bool,
+    /// Reason counts over all streams, forgotten ones included.
+    pub reasons: BTreeMap<String, u64>,
 }
 
 /// Run the node until `shutdown` resolves.
@@ -148,19 +194,27 @@ where
 {
     cfg.validate()?;
     let pool = cfg.compute_pool()?;
-    let participant = Arc::new(Participant::open(&cfg.transport).await?);
+    // zenoh drops a message above the backend's limit while reassembling
+    // it, so `wire.max_bytes` bounds what is ever held of one message.
+    let mut transport = cfg.transport.clone();
+    transport.zenoh.max_message_bytes = backend.max_message_bytes();
+    let participant = Arc::new(Participant::open(&transport).await?);
     tracing::info!(zid = participant.zid(), node = %cfg.transport.node_name, "node started");
     let (new_tx, mut new_rx) = mpsc::channel::<String>(cfg.max_streams.max(16));
+    // No deadline: a day is as good as none, and keeps `Frame::deadline` an Instant.
+    let deadline = backend
+        .frame_deadline()
+        .unwrap_or(Duration::from_secs(86_400));
+    let stall = backend.frame_budget().unwrap_or(Duration::ZERO)
+        + Duration::from_millis(cfg.stall_after_ms);
     let shared = Arc::new(Shared {
         streams: Mutex::new(HashMap::new()),
         new_tx,
         ignored: Ignored::default(),
         cfg: cfg.clone(),
+        stall_ns: i64::try_from(stall.as_nanos()).unwrap_or(i64::MAX),
+        retired: Mutex::new(BTreeMap::new()),
     });
-    // No deadline: a day is as good as none, and keeps `Frame::deadline` an Instant.
-    let deadline = backend
-        .frame_deadline()
-        .unwrap_or(Duration::from_secs(86_400));
 
     let input_type = cfg.transport.advertised(&backend.input_type());
     let mut subscribers = Vec::new();
@@ -297,6 +351,7 @@ fn on_sample(shared: &Shared, r: Received, deadline: Duration) {
         slot: Arc::new(LatestSlot::new()),
         stats: Arc::new(Mutex::new(StreamStats::default())),
         busy: AtomicBool::new(false),
+        computing_since_ns: AtomicI64::new(0),
     });
     if shared.new_tx.try_send(topic.clone()).is_err() {
         shared.ignored.over_capacity.fetch_add(1, Ordering::Relaxed);
@@ -322,6 +377,8 @@ struct Taken {
     received_ns: i64,
     source_ns: Option<i64>,
     deadline: Instant,
+    /// Wall time the frame spent in compute.
+    busy: Duration,
     result: super::backend::FrameResult,
 }
 
@@ -329,132 +386,53 @@ struct Taken {
 /// when the slot was empty by the time the job ran).
 type Done = (Box<dyn TopicProcessor>, Option<Taken>);
 
+/// How a compute job ended, seen from the stream task.
+enum Computed {
+    /// The frame was abandoned at shutdown (the processor with it).
+    Abandoned,
+    /// The slot was empty when the job ran.
+    Empty(Box<dyn TopicProcessor>),
+    /// The frame was processed.
+    Done(Box<dyn TopicProcessor>, Taken),
+}
+
+type Publishers = BTreeMap<OutputKind, RosPublisher>;
+
 /// One stream's worker; returns whether it stopped cleanly (no abandoned frame).
 async fn stream_task(mut ctx: StreamCtx) -> bool {
-    let topic = ctx.topic.clone();
-    let tr = &ctx.cfg.transport;
-    let token = match ctx
-        .participant
-        .declare_entity(
-            EntityKind::Subscription,
-            &topic,
-            &tr.advertised(&ctx.backend.input_type()),
-            Qos::SENSOR_DATA,
-        )
-        .await
-    {
-        Ok(t) => Some(t),
-        Err(e) => {
-            tracing::warn!(%topic, error = %e, "cannot declare subscription token");
-            None
-        }
-    };
-    let mut pubs: BTreeMap<OutputKind, RosPublisher> = BTreeMap::new();
-    for kind in OutputKind::ALL {
-        let out = expand_topic_template(ctx.cfg.outputs.template(kind), &topic);
-        let ty = tr.advertised(&ctx.backend.output_type(kind));
-        match ctx
-            .participant
-            .publisher(&out, &ty, ctx.cfg.output_qos())
-            .await
-        {
-            Ok(p) => {
-                pubs.insert(kind, p);
-            }
-            Err(e) => tracing::warn!(%topic, output = %out, error = %e, "cannot declare publisher"),
-        }
-    }
-    let mut processor: Option<Box<dyn TopicProcessor>> = Some(ctx.backend.processor(&topic));
-    let shutdown_bound = Duration::from_millis(ctx.cfg.shutdown_timeout_ms);
+    let (token, pubs) = declare_stream(&ctx).await;
+    let mut processor: Option<Box<dyn TopicProcessor>> = Some(ctx.backend.processor(&ctx.topic));
+    let mut meter = ctx
+        .cfg
+        .compute_share
+        .as_ref()
+        .map(|c| ShareMeter::new(c, Instant::now()));
     let mut clean = true;
     loop {
         if ctx.stream.slot.has_pending() {
-            let Some(mut p) = processor.take() else { break };
-            ctx.stream.busy.store(true, Ordering::Release);
-            let (tx, mut rx) = oneshot::channel::<Done>();
-            // Late binding: the job takes the newest frame when a compute
-            // thread is free, so a frame never ages in the pool's queue while
-            // a newer one waits in the slot (that older one is then counted
-            // as dropped, and the deadline is not spent waiting).
-            let slot = ctx.stream.slot.clone();
-            ctx.pool.spawn(move || {
-                let Some(frame) = slot.take() else {
-                    let _ = tx.send((p, None));
-                    return;
-                };
-                let span = tracing::info_span!("frame", topic = %frame.topic, seq = ?frame.sequence);
-                let _enter = span.enter();
-                let result = p.process(&frame);
-                tracing::debug!(objects = result.objects.len(), error = ?result.error, "frame done");
-                let taken = Taken {
-                    received_ns: frame.received_ns,
-                    source_ns: frame.source_ns,
-                    deadline: frame.deadline,
-                    result,
-                };
-                let _ = tx.send((p, Some(taken)));
-            });
-            let stop = ctx.stop.clone();
-            let done = tokio::select! {
-                r = &mut rx => r.ok(),
-                () = wait_stop(stop) => tokio::time::timeout(shutdown_bound, &mut rx).await.ok().and_then(Result::ok),
-            };
-            let Some((p, taken)) = done else {
-                tracing::warn!(%topic, "in-flight frame abandoned at shutdown");
-                clean = false;
-                break;
-            };
-            processor = Some(p);
-            let Some(Taken {
-                received_ns,
-                source_ns,
-                deadline,
-                result,
-            }) = taken
-            else {
-                ctx.stream.busy.store(false, Ordering::Release);
+            if let Some(debt) = meter.as_mut().and_then(|m| m.debt(Instant::now())) {
+                if !sit_out(&ctx, debt).await {
+                    break;
+                }
                 continue;
-            };
-            for out in result.outputs {
-                if let Some(publ) = pubs.get(&out.kind) {
-                    if let Err(e) = publ.put(out.payload).await {
-                        tracing::warn!(%topic, error = %e, "publish failed");
+            }
+            let Some(p) = processor.take() else { break };
+            match compute(&ctx, p).await {
+                Computed::Abandoned => {
+                    tracing::warn!(topic = %ctx.topic, "in-flight frame abandoned at shutdown");
+                    clean = false;
+                    break;
+                }
+                Computed::Empty(p) => processor = Some(p),
+                Computed::Done(p, mut taken) => {
+                    processor = Some(p);
+                    if let Some(m) = meter.as_mut() {
+                        m.charge(taken.busy, Instant::now());
                     }
+                    let outputs = std::mem::take(&mut taken.result.outputs);
+                    let failed = publish_outputs(&pubs, &ctx.topic, outputs).await;
+                    record(&ctx, taken, failed);
                 }
-            }
-            let now = now_ns();
-            ctx.stream.slot.touch(now);
-            ctx.stream.busy.store(false, Ordering::Release);
-            let late = Instant::now() > deadline;
-            let mut st = lock(&ctx.stream.stats);
-            st.frames += 1;
-            st.drops = ctx.stream.slot.dropped();
-            st.received = ctx.stream.slot.received();
-            st.latency.push((now - received_ns) as f64 * 1e-9);
-            if let Some(s) = source_ns {
-                st.e2e.push((now - s) as f64 * 1e-9);
-            }
-            if late {
-                st.late += 1;
-            }
-            st.last_failed = result.error.is_some();
-            if let Some(e) = result.error {
-                tracing::warn!(%topic, error = %e, "frame failed");
-                st.errors += 1;
-                st.last_error = Some(e);
-            }
-            for o in result.objects {
-                let e = st.objects.entry(o.stream.clone()).or_insert(ObjectStats {
-                    last: o.clone(),
-                    warm: 0,
-                    cold: 0,
-                });
-                if o.warm {
-                    e.warm += 1;
-                } else {
-                    e.cold += 1;
-                }
-                e.last = o;
             }
             continue;
         }
@@ -468,24 +446,195 @@ async fn stream_task(mut ctx: StreamCtx) -> bool {
     }
     // Final outputs (e.g. DELETEALL markers), then withdraw everything.
     if let Some(mut p) = processor {
-        for out in p.on_evict() {
-            if let Some(publ) = pubs.get(&out.kind) {
-                let _ = publ.put(out.payload).await;
-            }
-        }
+        publish_outputs(&pubs, &ctx.topic, p.on_evict()).await;
     }
     for (_, p) in pubs {
         if let Err(e) = p.undeclare().await {
-            tracing::warn!(%topic, error = %e, "undeclaring publisher");
+            tracing::warn!(topic = %ctx.topic, error = %e, "undeclaring publisher");
         }
     }
     if let Some(t) = token {
         if let Err(e) = t.undeclare().await {
-            tracing::warn!(%topic, error = %e, "undeclaring subscription token");
+            tracing::warn!(topic = %ctx.topic, error = %e, "undeclaring subscription token");
         }
     }
-    tracing::info!(%topic, "stream stopped");
+    tracing::info!(topic = %ctx.topic, "stream stopped");
     clean
+}
+
+/// The stream's subscription token and output publishers.
+async fn declare_stream(ctx: &StreamCtx) -> (Option<EntityToken>, Publishers) {
+    let topic = &ctx.topic;
+    let tr = &ctx.cfg.transport;
+    let token = match ctx
+        .participant
+        .declare_entity(
+            EntityKind::Subscription,
+            topic,
+            &tr.advertised(&ctx.backend.input_type()),
+            Qos::SENSOR_DATA,
+        )
+        .await
+    {
+        Ok(t) => Some(t),
+        Err(e) => {
+            tracing::warn!(%topic, error = %e, "cannot declare subscription token");
+            None
+        }
+    };
+    let mut pubs = Publishers::new();
+    for kind in OutputKind::ALL {
+        let out = expand_topic_template(ctx.cfg.outputs.template(kind), topic);
+        let ty = tr.advertised(&ctx.backend.output_type(kind));
+        match ctx
+            .participant
+            .publisher(&out, &ty, ctx.cfg.output_qos())
+            .await
+        {
+            Ok(p) => {
+                pubs.insert(kind, p);
+            }
+            Err(e) => tracing::warn!(%topic, output = %out, error = %e, "cannot declare publisher"),
+        }
+    }
+    (token, pubs)
+}
+
+/// Hand the stream's newest frame and its processor to the compute pool and
+/// wait for the result (tokio workers never block).
+async fn compute(ctx: &StreamCtx, mut p: Box<dyn TopicProcessor>) -> Computed {
+    ctx.stream.busy.store(true, Ordering::Release);
+    let (tx, mut rx) = oneshot::channel::<Done>();
+    // Late binding: the job takes the newest frame when a compute thread is
+    // free, so a frame never ages in the pool's queue while a newer one
+    // waits in the slot (that older one is then counted as dropped, and the
+    // deadline is not spent waiting).
+    let stream = ctx.stream.clone();
+    ctx.pool.spawn(move || {
+        let Some(frame) = stream.slot.take() else {
+            let _ = tx.send((p, None));
+            return;
+        };
+        let span = tracing::info_span!("frame", topic = %frame.topic, seq = ?frame.sequence);
+        let _enter = span.enter();
+        let start = Instant::now();
+        stream.computing_since_ns.store(now_ns(), Ordering::Release);
+        let result = p.process(&frame);
+        stream.computing_since_ns.store(0, Ordering::Release);
+        tracing::debug!(objects = result.objects.len(), error = ?result.error, "frame done");
+        let taken = Taken {
+            received_ns: frame.received_ns,
+            source_ns: frame.source_ns,
+            deadline: frame.deadline,
+            busy: start.elapsed(),
+            result,
+        };
+        let _ = tx.send((p, Some(taken)));
+    });
+    let shutdown_bound = Duration::from_millis(ctx.cfg.shutdown_timeout_ms);
+    let done = tokio::select! {
+        r = &mut rx => r.ok(),
+        () = wait_stop(ctx.stop.clone()) => tokio::time::timeout(shutdown_bound, &mut rx).await.ok().and_then(Result::ok),
+    };
+    match done {
+        None => Computed::Abandoned,
+        Some((p, None)) => {
+            ctx.stream.busy.store(false, Ordering::Release);
+            Computed::Empty(p)
+        }
+        Some((p, Some(taken))) => Computed::Done(p, taken),
+    }
+}
+
+/// The stream is `debt` over its compute share: its pending frame waits
+/// until it has earned that back (frames arriving meanwhile replace it, as
+/// in any keep-latest slot). The waiting frame and those replaced are
+/// counted as `over_budget`. Returns `false` at shutdown.
+async fn sit_out(ctx: &StreamCtx, debt: Duration) -> bool {
+    let dropped = ctx.stream.slot.dropped();
+    // A stream with a frame waiting is not silent: never evicted meanwhile.
+    ctx.stream.busy.store(true, Ordering::Release);
+    let running = tokio::select! {
+        () = tokio::time::sleep(debt) => true,
+        () = wait_stop(ctx.stop.clone()) => false,
+    };
+    ctx.stream.slot.touch(now_ns());
+    ctx.stream.busy.store(false, Ordering::Release);
+    let n = ctx.stream.slot.dropped().saturating_sub(dropped) + 1;
+    *lock(&ctx.stream.stats)
+        .reasons
+        .entry(reasons::OVER_BUDGET)
+        .or_default() += n;
+    running
+}
+
+/// Publish a frame's outputs; returns how many could not be.
+async fn publish_outputs(
+    pubs: &Publishers,
+    topic: &str,
+    outputs: Vec<super::backend::Output>,
+) -> u64 {
+    let mut failed = 0;
+    for out in outputs {
+        let Some(publ) = pubs.get(&out.kind) else {
+            failed += 1;
+            continue;
+        };
+        if let Err(e) = publ.put(out.payload).await {
+            tracing::warn!(%topic, error = %e, "publish failed");
+            failed += 1;
+        }
+    }
+    failed
+}
+
+/// Add one processed frame to the stream's statistics.
+fn record(ctx: &StreamCtx, taken: Taken, outputs_failed: u64) {
+    let now = now_ns();
+    ctx.stream.slot.touch(now);
+    ctx.stream.busy.store(false, Ordering::Release);
+    let late = Instant::now() > taken.deadline;
+    let result = taken.result;
+    let mut st = lock(&ctx.stream.stats);
+    st.frames += 1;
+    st.drops = ctx.stream.slot.dropped();
+    st.received = ctx.stream.slot.received();
+    st.latency.push((now - taken.received_ns) as f64 * 1e-9);
+    if let Some(s) = taken.source_ns {
+        st.e2e.push((now - s) as f64 * 1e-9);
+    }
+    if late {
+        st.late += 1;
+    }
+    for (reason, n) in result.counts {
+        *st.reasons.entry(reason).or_default() += n;
+    }
+    if outputs_failed > 0 {
+        *st.reasons.entry(reasons::OUTPUTS_FAILED).or_default() += outputs_failed;
+    }
+    st.last_failed = result.error.is_some();
+    if let Some(e) = result.error {
+        tracing::warn!(topic = %ctx.topic, error = %e, "frame failed");
+        st.errors += 1;
+        st.last_error = Some(bounded(e));
+    }
+    for gone in &result.evicted {
+        st.objects.remove(gone);
+    }
+    for mut o in result.objects {
+        o.message = bounded(o.message);
+        let e = st.objects.entry(o.stream.clone()).or_insert(ObjectStats {
+            last: o.clone(),
+            warm: 0,
+            cold: 0,
+        });
+        if o.warm {
+            e.warm += 1;
+        } else {
+            e.cold += 1;
+        }
+        e.last = o;
+    }
 }
 
 async fn wait_stop(mut stop: watch::Receiver<bool>) {
@@ -511,8 +660,136 @@ fn evict(shared: &Shared, all: &mut BTreeMap<String, Arc<Mutex<StreamStats>>>) {
         }
     }
     drop(map);
-    // Forget streams that have been reported STALE for another period.
-    all.retain(|_, st| lock(st).stale_since_ns.is_none_or(|t| now - t <= after));
+    // Forget streams that have been reported STALE for another period; the
+    // node's totals keep their counts.
+    let mut retired = lock(&shared.retired);
+    all.retain(|_, st| {
+        let st = lock(st);
+        let keep = st.stale_since_ns.is_none_or(|t| now - t <= after);
+        if !keep {
+            for (r, n) in &st.reasons {
+                *retired.entry(*r).or_default() += n;
+            }
+        }
+        keep
+    });
+}
+
+/// How a stream's compute stands at `now_ns`: stalled (a frame in compute
+/// for longer than the stall bound), over its share since the last report,
+/// or fine.
+fn compute_state(
+    shared: &Shared,
+    since: i64,
+    st: &mut StreamStats,
+    now_ns: i64,
+) -> Option<(Level, String)> {
+    let over = st.count(reasons::OVER_BUDGET);
+    let new_over = over - st.reported_over_budget.min(over);
+    st.reported_over_budget = over;
+    if since > 0 && now_ns - since > shared.stall_ns {
+        let ms = (now_ns - since) / 1_000_000;
+        return Some((
+            Level::Error,
+            format!("stalled: one frame has held a compute thread for {ms} ms"),
+        ));
+    }
+    (new_over > 0).then(|| {
+        (
+            Level::Warn,
+            format!("over its compute share: {new_over} frames skipped"),
+        )
+    })
+}
+
+/// The `/diagnostics` values every status of a stream carries.
+fn stream_values(topic: &str, st: &StreamStats) -> Vec<(String, String)> {
+    let ms = |v: Option<f64>| v.map_or_else(|| "nan".to_string(), |s| format!("{:.3}", s * 1e3));
+    let mut v = vec![
+        ("topic".into(), topic.to_string()),
+        ("frames".into(), st.frames.to_string()),
+        ("drops".into(), st.drops.to_string()),
+        ("errors".into(), st.errors.to_string()),
+        ("late".into(), st.late.to_string()),
+        ("p50_ms".into(), ms(st.latency.quantile(0.5))),
+        ("p95_ms".into(), ms(st.latency.quantile(0.95))),
+        ("e2e_p95_ms".into(), ms(st.e2e.quantile(0.95))),
+    ];
+    v.extend(
+        reasons::ALL
+            .iter()
+            .map(|r| ((*r).to_string(), st.count(r).to_string())),
+    );
+    v
+}
+
+/// The node's own status: counts of samples that reached no stream, and
+/// each reason summed over all streams (forgotten ones included).
+fn node_status(
+    shared: &Shared,
+    all: &BTreeMap<String, Arc<Mutex<StreamStats>>>,
+    last: bool,
+    troubled: usize,
+) -> StatusEntry {
+    let node = &shared.cfg.transport.node_name;
+    let ig = &shared.ignored;
+    let live = lock(&shared.streams).len();
+    let mut values: Vec<(String, String)> = vec![
+        ("streams".into(), live.to_string()),
+        (
+            "shard".into(),
+            format!("{}/{}", shared.cfg.shard.index, shared.cfg.shard.count),
+        ),
+    ];
+    let ignored = [
+        ("foreign_keys", &ig.foreign_keys),
+        ("other_shard", &ig.other_shard),
+        ("over_capacity", &ig.over_capacity),
+        ("bad_attachments", &ig.bad_attachments),
+    ];
+    values.extend(
+        ignored
+            .iter()
+            .map(|(k, v)| ((*k).to_string(), v.load(Ordering::Relaxed).to_string())),
+    );
+    values.extend(
+        totals(shared, all)
+            .into_iter()
+            .map(|(k, v)| (k, v.to_string())),
+    );
+    let (level, message) = match (last, troubled) {
+        (true, _) => (Level::Ok, "shutting down".to_string()),
+        (false, 0) => (Level::Ok, "running".to_string()),
+        (false, n) => (
+            Level::Warn,
+            format!("running; {n} streams stalled or over their compute share"),
+        ),
+    };
+    StatusEntry {
+        name: format!("{node}: node"),
+        level,
+        message,
+        hardware_id: node.clone(),
+        values,
+    }
+}
+
+/// Every reason summed over all streams, forgotten ones included.
+fn totals(
+    shared: &Shared,
+    all: &BTreeMap<String, Arc<Mutex<StreamStats>>>,
+) -> BTreeMap<String, u64> {
+    let mut t: BTreeMap<String, u64> = reasons::ALL.iter().map(|r| ((*r).to_string(), 0)).collect();
+    let mut add = |r: &str, n: u64| *t.entry(r.to_string()).or_default() += n;
+    for (r, n) in lock(&shared.retired).iter() {
+        add(r, *n);
+    }
+    for st in all.values() {
+        for (r, n) in &lock(st).reasons {
+            add(r, *n);
+        }
+    }
+    t
 }
 
 fn statuses(
@@ -521,50 +798,20 @@ fn statuses(
     last: bool,
 ) -> Vec<StatusEntry> {
     let node = &shared.cfg.transport.node_name;
-    let hw = node.clone();
-    let ms = |v: Option<f64>| v.map_or_else(|| "nan".to_string(), |s| format!("{:.3}", s * 1e3));
+    let now = now_ns();
     let mut out = Vec::new();
-    let live = lock(&shared.streams).len();
-    let ig = &shared.ignored;
-    out.push(StatusEntry {
-        name: format!("{node}: node"),
-        level: Level::Ok,
-        message: if last {
-            "shutting down".into()
-        } else {
-            "running".into()
-        },
-        hardware_id: hw.clone(),
-        values: vec![
-            ("streams".into(), live.to_string()),
-            (
-                "shard".into(),
-                format!("{}/{}", shared.cfg.shard.index, shared.cfg.shard.count),
-            ),
-            (
-                "foreign_keys".into(),
-                ig.foreign_keys.load(Ordering::Relaxed).to_string(),
-            ),
-            (
-                "other_shard".into(),
-                ig.other_shard.load(Ordering::Relaxed).to_string(),
-            ),
-            (
-                "over_capacity".into(),
-                ig.over_capacity.load(Ordering::Relaxed).to_string(),
-            ),
-            (
-                "bad_attachments".into(),
-                ig.bad_attachments.load(Ordering::Relaxed).to_string(),
-            ),
-        ],
-    });
+    let mut troubled = 0;
     for (topic, st) in all {
+        let since = lock(&shared.streams)
+            .get(topic)
+            .map_or(0, |s| s.computing_since_ns.load(Ordering::Acquire));
         let mut st = lock(st);
         let new_drops = st.drops > st.reported_drops;
         let new_late = st.late > st.reported_late;
         st.reported_drops = st.drops;
         st.reported_late = st.late;
+        let compute = compute_state(shared, since, &mut st, now);
+        troubled += usize::from(compute.is_some());
         let base_level = if st.stale_since_ns.is_some() {
             Level::Stale
         } else if st.last_failed {
@@ -574,33 +821,27 @@ fn statuses(
         } else {
             Level::Ok
         };
-        let common = |v: &mut Vec<(String, String)>, st: &StreamStats| {
-            v.push(("topic".into(), topic.clone()));
-            v.push(("frames".into(), st.frames.to_string()));
-            v.push(("drops".into(), st.drops.to_string()));
-            v.push(("errors".into(), st.errors.to_string()));
-            v.push(("late".into(), st.late.to_string()));
-            v.push(("p50_ms".into(), ms(st.latency.quantile(0.5))));
-            v.push(("p95_ms".into(), ms(st.latency.quantile(0.95))));
-            v.push(("e2e_p95_ms".into(), ms(st.e2e.quantile(0.95))));
-        };
+        let base_level = compute
+            .as_ref()
+            .map_or(base_level, |(l, _)| base_level.max(*l));
         let stale_msg = "stream silent: evicted";
+        let entry = |name: &str, level: Level, message: String, values| StatusEntry {
+            name: format!("{node}: {name}"),
+            level,
+            message: match (&compute, level) {
+                (_, Level::Stale) => stale_msg.into(),
+                (Some((_, why)), _) => format!("{why}; {message}"),
+                (None, _) => message,
+            },
+            hardware_id: node.clone(),
+            values,
+        };
         if st.objects.is_empty() {
-            let mut values = Vec::new();
-            common(&mut values, &st);
-            out.push(StatusEntry {
-                name: format!("{node}: {topic}"),
-                level: base_level,
-                message: if base_level == Level::Stale {
-                    stale_msg.into()
-                } else {
-                    st.last_error
-                        .clone()
-                        .unwrap_or_else(|| "no object yet".into())
-                },
-                hardware_id: hw.clone(),
-                values,
-            });
+            let message = st
+                .last_error
+                .clone()
+                .unwrap_or_else(|| "no object yet".into());
+            out.push(entry(topic, base_level, message, stream_values(topic, &st)));
             continue;
         }
         for (name, o) in &st.objects {
@@ -609,28 +850,23 @@ fn statuses(
                 ("iterations".into(), o.last.iterations.to_string()),
                 ("warm".into(), o.warm.to_string()),
                 ("cold".into(), o.cold.to_string()),
+                ("quality".into(), o.last.quality.unwrap_or("").to_string()),
             ];
-            common(&mut values, &st);
+            values.extend(stream_values(topic, &st));
             let level = if base_level == Level::Stale {
                 Level::Stale
             } else {
                 base_level.max(o.last.level)
             };
             let message = match level {
-                Level::Stale => stale_msg.to_string(),
-                Level::Error => st.last_error.clone().unwrap_or_default(),
+                Level::Error if st.last_failed => st.last_error.clone().unwrap_or_default(),
                 _ if new_drops => format!("{}; dropping frames", o.last.message),
                 _ => o.last.message.clone(),
             };
-            out.push(StatusEntry {
-                name: format!("{node}: {name}"),
-                level,
-                message,
-                hardware_id: hw.clone(),
-                values,
-            });
+            out.push(entry(name, level, message, values));
         }
     }
+    out.insert(0, node_status(shared, all, last, troubled));
     out
 }
 
@@ -669,6 +905,11 @@ fn summarize(
                 p50_s: st.latency.quantile(0.5),
                 p95_s: st.latency.quantile(0.95),
                 stale: st.stale_since_ns.is_some(),
+                reasons: st
+                    .reasons
+                    .iter()
+                    .map(|(r, n)| ((*r).to_string(), *n))
+                    .collect(),
             }
         })
         .collect();
@@ -680,5 +921,6 @@ fn summarize(
         over_capacity: ig.over_capacity.load(Ordering::Relaxed),
         bad_attachments: ig.bad_attachments.load(Ordering::Relaxed),
         clean_shutdown: clean,
+        reasons: totals(shared, all),
     }
 }

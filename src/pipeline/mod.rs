@@ -24,6 +24,7 @@
 
 pub mod align;
 pub mod engine;
+pub mod objects;
 pub mod outputs;
 
 pub use crate::stream::StreamKey;
@@ -94,6 +95,9 @@ pub struct PipelineConfig {
     /// Ground-truth samples within this fraction of the object size of an
     /// observed point count as seen (visible recall).
     pub score_visible_radius: f64,
+    /// Limits on the objects of a stream (cap per frame, label eviction,
+    /// quality verdict), see [`objects`].
+    pub objects: objects::ObjectsConfig,
 }
 
 impl Default for PipelineConfig {
@@ -121,6 +125,7 @@ impl Default for PipelineConfig {
             marker_namespace: "sepmem".into(),
             score_samples: 10_000,
             score_visible_radius: 0.02,
+            objects: objects::ObjectsConfig::default(),
         }
     }
 }

@@ -1,11 +1,19 @@
 //! Output messages of one processed frame: sepmem's stamped mesh, the
 //! per-frame diagnostics, and RViz/Foxglove TRIANGLE_LIST markers.
 //!
+//! Every mesh carries the verdict on its surface ([`Quality`], the
+//! `quality` field of `SurfaceMesh`): under CPU load the demo once
+//! published the octagon start surface of a cold start after 0 iterations
+//! as a cereal box, and nothing in the mesh or marker said so. A surface
+//! that is not fitted is drawn in one colour that says why (grey held,
+//! orange unconverged, red unfitted) instead of the separability ramp.
+//!
 //! The mesh carries the per-vertex separability `η*` found at each sample
 //! (paper Eq. 7 / Eq. 9) and the global separability η_g, the mean of the
 //! per-sample maxima (paper §III-F step 1). Marker colours map the vertex
 //! separability to a blue (low) → yellow (high) ramp.
 
+use super::objects::Quality;
 use super::{FrameResult, StartPath};
 use crate::wire::convert::{delete_all_marker, to_shape_mesh, to_triangle_list_marker};
 use crate::wire::msgs::{ColorRGBA, FrameDiagnostics, Header, Marker, MarkerArray, SurfaceMesh};
@@ -13,7 +21,8 @@ use crate::wire::msgs::{ColorRGBA, FrameDiagnostics, Header, Marker, MarkerArray
 /// Name of the per-vertex separability channel in membrane meshes.
 pub const SEPARABILITY: &str = "separability";
 
-/// sepmem's stamped mesh message for a frame.
+/// sepmem's stamped mesh message for a frame, with the frame's own verdict
+/// ([`Quality::of_frame`]; the node refines it with the object's history).
 pub fn surface_mesh(r: &FrameResult, header: &Header) -> SurfaceMesh {
     let rec = &r.reconstruction;
     let mesh = &rec.mesh;
@@ -35,6 +44,7 @@ pub fn surface_mesh(r: &FrameResult, header: &Header) -> SurfaceMesh {
         warm_start: r.path == StartPath::Warm,
         start_reason: r.reason.to_string(),
         stop_reason: rec.report.stop.to_string(),
+        quality: Quality::of_frame(r).code(),
     }
 }
 
@@ -87,8 +97,16 @@ fn ramp(s: f32) -> ColorRGBA {
 }
 
 /// One TRIANGLE_LIST marker for a frame's mesh (namespace `ns`), coloured
-/// per vertex by its separability.
+/// per vertex by its separability when it is fitted, else in the colour of
+/// its verdict ([`Quality::marker_color`]).
 pub fn triangle_marker(r: &FrameResult, header: &Header, ns: &str) -> Marker {
+    let mut m = separability_marker(r, header, ns);
+    Quality::of_frame(r).paint(&mut m);
+    m
+}
+
+/// [`triangle_marker`] coloured by separability whatever the verdict.
+pub fn separability_marker(r: &FrameResult, header: &Header, ns: &str) -> Marker {
     let mesh = &r.reconstruction.mesh;
     let base = ColorRGBA {
         r: 0.2,
@@ -116,10 +134,22 @@ pub fn triangle_marker(r: &FrameResult, header: &Header, ns: &str) -> Marker {
 /// A marker array that first clears the namespace (DELETEALL, so vanished
 /// objects disappear) and then adds one marker per current object.
 pub fn marker_array(results: &[&FrameResult], header: &Header, ns: &str) -> MarkerArray {
-    let mut markers = Vec::with_capacity(results.len() + 1);
+    cleared_markers(
+        results
+            .iter()
+            .map(|r| triangle_marker(r, header, ns))
+            .collect(),
+        header,
+        ns,
+    )
+}
+
+/// A DELETEALL marker for namespace `ns`, then `markers`.
+pub fn cleared_markers(markers: Vec<Marker>, header: &Header, ns: &str) -> MarkerArray {
     let mut clear = delete_all_marker(header.clone());
     clear.ns = ns.to_string();
-    markers.push(clear);
-    markers.extend(results.iter().map(|r| triangle_marker(r, header, ns)));
-    MarkerArray { markers }
+    let mut all = Vec::with_capacity(markers.len() + 1);
+    all.push(clear);
+    all.extend(markers);
+    MarkerArray { markers: all }
 }

@@ -58,6 +58,12 @@ pub struct ZenohSettings {
     pub config_file: String,
     /// Multicast scouting (off by default, as in rmw_zenoh).
     pub multicast_scouting: bool,
+    /// zenoh's receive limit `transport/link/rx/max_message_size` (bytes):
+    /// a larger message is dropped by zenoh while it is reassembled, before
+    /// it is held whole. Not a configuration key: the node sets it from
+    /// `wire.max_bytes` (`None`: zenoh's default, 1 GiB).
+    #[serde(skip)]
+    pub max_message_bytes: Option<usize>,
 }
 
 /// Transport settings (`node.transport`).
@@ -133,6 +139,7 @@ impl TransportConfig {
                     .unwrap_or_default(),
                 config_file: String::new(),
                 multicast_scouting: false,
+                max_message_bytes: None,
             },
         }
     }

@@ -60,6 +60,9 @@ pub fn zenoh_config(cfg: &TransportConfig) -> Result<zenoh::Config, TransportErr
         "scouting/multicast/enabled",
         z.multicast_scouting.to_string(),
     )?;
+    if let Some(n) = z.max_message_bytes {
+        set(&mut c, "transport/link/rx/max_message_size", n.to_string())?;
+    }
     Ok(c)
 }
 

@@ -376,6 +376,19 @@ pub struct SurfaceMesh {
     pub start_reason: String,
     /// Why the iterations stopped.
     pub stop_reason: String,
+    /// Verdict on the surface: [`SurfaceMesh::FITTED`] … [`SurfaceMesh::HELD`].
+    pub quality: u8,
+}
+
+impl SurfaceMesh {
+    /// Converged, or evolved long enough since its cold start.
+    pub const FITTED: u8 = 0;
+    /// Stopped by its budget before converging.
+    pub const UNCONVERGED: u8 = 1;
+    /// Not evolved (the start surface) or separating nothing.
+    pub const UNFITTED: u8 = 2;
+    /// This frame was not fitted: the object's last fitted mesh, republished.
+    pub const HELD: u8 = 3;
 }
 
 /// sepmem_msgs/msg/FrameDiagnostics (see `msg/msg/FrameDiagnostics.msg`).
@@ -535,7 +548,7 @@ ros_message!(
 ros_message!(
     SurfaceMesh,
     "sepmem_msgs/msg/SurfaceMesh",
-    "RIHS01_e58b7443254343a6925db9155a7a5eb19c42c0c58dbe39a71e98bdd4e0bd6def"
+    "RIHS01_05633ada0a679eeaaaa89e1eecb13fcaa2c6ad46ede862663d5350f5617743b3"
 );
 ros_message!(
     FrameDiagnostics,

@@ -133,7 +133,8 @@ def surface_mesh():
                        triangles=[MeshTriangle(vertex_indices=np.array([0, 1, 2], dtype=np.uint32))],
                        vertex_separability=np.array([0.25, 0.5, 0.75], dtype=np.float32),
                        global_separability=0.875, grid_m=16, grid_l=9, iterations=12,
-                       warm_start=True, start_reason='previous_surface', stop_reason='converged')
+                       warm_start=True, start_reason='previous_surface', stop_reason='converged',
+                       quality=3)
 
 
 def frame_diagnostics():
