@@ -15,12 +15,13 @@ use super::backend::{
 use super::stats::Level;
 use crate::membrane::MembraneConfig;
 use crate::membrane::StopReason;
+use crate::pipeline::collision::{CollisionConfig, CollisionObjects};
 use crate::pipeline::engine::{decode_sample, Processed, StreamCloud};
 use crate::pipeline::{outputs, PipelineConfig, StartPath, StreamKey, Tracker};
 use crate::transport::RosType;
 use crate::wire::msgs::{
-    DiagnosticArray, DiagnosticStatus, FrameDiagnostics, Header, KeyValue, MarkerArray,
-    PointCloud2, SurfaceMesh, Time,
+    CollisionObject, DiagnosticArray, DiagnosticStatus, FrameDiagnostics, Header, KeyValue,
+    MarkerArray, PointCloud2, SurfaceMesh, Time,
 };
 use crate::wire::pointcloud2::WireConfig;
 use crate::wire::{self, RosMessage};
@@ -38,6 +39,7 @@ pub struct PipelineBackend {
     membrane: MembraneConfig,
     pipeline: PipelineConfig,
     limits: WireConfig,
+    collision: Option<CollisionConfig>,
 }
 
 impl PipelineBackend {
@@ -47,12 +49,20 @@ impl PipelineBackend {
             membrane,
             pipeline,
             limits,
+            collision: None,
         }
+    }
+
+    /// Also publish MoveIt collision objects (`node.outputs.collision_objects`).
+    pub fn with_collision_objects(mut self, collision: Option<CollisionConfig>) -> Self {
+        self.collision = collision;
+        self
     }
 
     /// A backend from the whole configuration.
     pub fn from_config(cfg: &crate::config::Config) -> Self {
         Self::new(cfg.membrane.clone(), cfg.pipeline.clone(), cfg.wire.clone())
+            .with_collision_objects(cfg.node.outputs.collision_objects.clone())
     }
 }
 
@@ -63,6 +73,7 @@ struct EngineProcessor {
     trackers: BTreeMap<StreamKey, Tracker>,
     ns: String,
     last_header: Header,
+    collision: Option<CollisionObjects>,
 }
 
 fn encode<M: RosMessage>(
@@ -177,6 +188,15 @@ impl TopicProcessor for EngineProcessor {
         }
         let markers: MarkerArray = outputs::marker_array(&ok, &sample.header, &self.ns);
         encode(OutputKind::Markers, &markers, &mut outs, &mut errors);
+        if let Some(co) = self.collision.as_mut() {
+            let trackers = &self.trackers;
+            let alive = |s: &str| trackers.keys().any(|k| k.to_string() == s);
+            let (msgs, errs) = co.frame(&ok, &sample.header, alive);
+            for m in &msgs {
+                encode(OutputKind::CollisionObjects, m, &mut outs, &mut errors);
+            }
+            errors.extend(errs);
+        }
         FrameResult {
             outputs: outs,
             objects,
@@ -190,14 +210,15 @@ impl TopicProcessor for EngineProcessor {
 
     fn on_evict(&mut self) -> Vec<Output> {
         let markers = outputs::marker_array(&[], &self.last_header, &self.ns);
-        wire::encode(&markers)
-            .map(|payload| {
-                vec![Output {
-                    kind: OutputKind::Markers,
-                    payload,
-                }]
-            })
-            .unwrap_or_default()
+        let mut outs = Vec::new();
+        let mut errors = Vec::new();
+        encode(OutputKind::Markers, &markers, &mut outs, &mut errors);
+        if let Some(co) = self.collision.as_mut() {
+            for m in co.retain(&self.last_header, |_| false) {
+                encode(OutputKind::CollisionObjects, &m, &mut outs, &mut errors);
+            }
+        }
+        outs
     }
 }
 
@@ -211,6 +232,7 @@ impl Backend for PipelineBackend {
             OutputKind::Markers => ty::<MarkerArray>(),
             OutputKind::Mesh => ty::<SurfaceMesh>(),
             OutputKind::FrameDiagnostics => ty::<FrameDiagnostics>(),
+            OutputKind::CollisionObjects => ty::<CollisionObject>(),
         }
     }
 
@@ -231,6 +253,7 @@ impl Backend for PipelineBackend {
             trackers: BTreeMap::new(),
             ns: self.pipeline.marker_namespace.clone(),
             last_header: Header::default(),
+            collision: self.collision.clone().map(CollisionObjects::new),
         })
     }
 

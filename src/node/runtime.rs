@@ -171,6 +171,7 @@ where
             .await?;
         subscribers.push(sub);
     }
+    let early_tokens = declare_exact_subscriptions(&participant, cfg, &input_type).await;
     let diag_topic = expand_topic_template(&cfg.outputs.diagnostics, "/");
     let diag_pub = participant
         .publisher(
@@ -245,8 +246,39 @@ where
     if let Err(e) = diag_pub.undeclare().await {
         tracing::warn!(error = %e, "undeclaring /diagnostics publisher");
     }
+    for t in early_tokens {
+        if let Err(e) = t.undeclare().await {
+            tracing::warn!(error = %e, "undeclaring subscription token");
+        }
+    }
     participant.close().await?;
     Ok(summary)
+}
+
+/// `MS` tokens for the configured topics without wildcards, declared at
+/// start so that the graph (`ros2 topic info`) shows the subscription before
+/// any sample arrives; streams of these topics then declare none of their own.
+async fn declare_exact_subscriptions(
+    participant: &Participant,
+    cfg: &NodeConfig,
+    input_type: &crate::transport::RosType,
+) -> Vec<crate::transport::EntityToken> {
+    let mut tokens = Vec::new();
+    for topic in cfg.exact_topics() {
+        match participant
+            .declare_entity(
+                EntityKind::Subscription,
+                &topic,
+                input_type,
+                Qos::SENSOR_DATA,
+            )
+            .await
+        {
+            Ok(t) => tokens.push(t),
+            Err(e) => tracing::warn!(%topic, error = %e, "cannot declare subscription token"),
+        }
+    }
+    tokens
 }
 
 fn on_sample(shared: &Shared, r: Received, deadline: Duration) {
@@ -333,29 +365,22 @@ type Done = (Box<dyn TopicProcessor>, Option<Taken>);
 async fn stream_task(mut ctx: StreamCtx) -> bool {
     let topic = ctx.topic.clone();
     let tr = &ctx.cfg.transport;
-    let token = match ctx
-        .participant
-        .declare_entity(
-            EntityKind::Subscription,
-            &topic,
-            &tr.advertised(&ctx.backend.input_type()),
-            Qos::SENSOR_DATA,
-        )
-        .await
-    {
-        Ok(t) => Some(t),
-        Err(e) => {
-            tracing::warn!(%topic, error = %e, "cannot declare subscription token");
-            None
-        }
+    // Exact topics have had their MS token since start (see `run`).
+    let token = if ctx.cfg.exact_topics().contains(&topic) {
+        None
+    } else {
+        declare_stream_subscription(&ctx, &topic).await
     };
     let mut pubs: BTreeMap<OutputKind, RosPublisher> = BTreeMap::new();
     for kind in OutputKind::ALL {
-        let out = expand_topic_template(ctx.cfg.outputs.template(kind), &topic);
+        let Some(template) = ctx.cfg.outputs.template(kind) else {
+            continue;
+        };
+        let out = expand_topic_template(template, &topic);
         let ty = tr.advertised(&ctx.backend.output_type(kind));
         match ctx
             .participant
-            .publisher(&out, &ty, ctx.cfg.output_qos())
+            .publisher(&out, &ty, ctx.cfg.output_qos_of(kind))
             .await
         {
             Ok(p) => {
@@ -486,6 +511,24 @@ async fn stream_task(mut ctx: StreamCtx) -> bool {
     }
     tracing::info!(%topic, "stream stopped");
     clean
+}
+
+async fn declare_stream_subscription(
+    ctx: &StreamCtx,
+    topic: &str,
+) -> Option<crate::transport::EntityToken> {
+    let ty = ctx.cfg.transport.advertised(&ctx.backend.input_type());
+    match ctx
+        .participant
+        .declare_entity(EntityKind::Subscription, topic, &ty, Qos::SENSOR_DATA)
+        .await
+    {
+        Ok(t) => Some(t),
+        Err(e) => {
+            tracing::warn!(%topic, error = %e, "cannot declare subscription token");
+            None
+        }
+    }
 }
 
 async fn wait_stop(mut stop: watch::Receiver<bool>) {

@@ -23,6 +23,7 @@
 //! [`score`].
 
 pub mod align;
+pub mod collision;
 pub mod engine;
 pub mod outputs;
 pub mod score;
