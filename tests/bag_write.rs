@@ -298,3 +298,108 @@ fn writer_rejects_conflicts_and_unknown_topics() {
         .is_err());
     assert!(w.write_raw("/c", 0, 0, &[0, 1, 0, 0]).is_err());
 }
+
+/// The rosbag2-written reference bags (`tests/data/rosbag2`, see SOURCE.md).
+fn rosbag2_fixture(name: &str) -> std::path::PathBuf {
+    common::data_dir().join("rosbag2").join(name)
+}
+
+/// The last `rosbag2` metadata record's `serialized_metadata` of an MCAP file.
+fn serialized_metadata(path: &Path) -> String {
+    let buf = std::fs::read(path).unwrap();
+    let mut last = None;
+    for record in mcap::read::LinearReader::new(&buf).unwrap() {
+        if let mcap::records::Record::Metadata(m) = record.unwrap() {
+            if m.name == "rosbag2" {
+                last = m.metadata.get("serialized_metadata").cloned();
+            }
+        }
+    }
+    last.expect("no rosbag2 metadata record")
+}
+
+/// Keys at the root of a block-style YAML map.
+fn root_keys(yaml: &str) -> Vec<String> {
+    yaml.lines()
+        .filter(|l| !l.starts_with(' ') && !l.starts_with('-'))
+        .filter_map(|l| l.split_once(':').map(|(k, _)| k.to_string()))
+        .collect()
+}
+
+#[test]
+fn serialized_metadata_is_the_bare_bag_metadata_map_of_rosbag2() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("meta_bag");
+    let summary = write_sample_bag(&dir);
+    let ours = serialized_metadata(&summary.mcap_path);
+    // rosbag2_storage_mcap's reader: node["version"].as<int>() at the root.
+    assert!(ours.starts_with("version: 9\n"), "{ours}");
+    assert!(!ours.contains("rosbag2_bagfile_information"));
+    let reference = serialized_metadata(&rosbag2_fixture("only_topics.mcap"));
+    assert_eq!(root_keys(&ours), root_keys(&reference));
+    // metadata.yaml keeps the wrapper key, with the same map under it.
+    let yaml = std::fs::read_to_string(summary.metadata_path.unwrap()).unwrap();
+    let fixture_yaml = std::fs::read_to_string(rosbag2_fixture("metadata.yaml")).unwrap();
+    assert_eq!(root_keys(&yaml), ["rosbag2_bagfile_information"]);
+    assert_eq!(root_keys(&yaml), root_keys(&fixture_yaml));
+    // The whole structure, key for key, parsed by PyYAML as rosbag2 parses it.
+    if !common::python_tools() {
+        eprintln!(
+            "SKIPPED serialized_metadata (PyYAML check): python3 with mcap not available \
+             (pip install -r tests/python/requirements.txt)"
+        );
+        return;
+    }
+    let script =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/check_rosbag2_metadata.py");
+    for fixture in [
+        "only_topics.mcap",
+        "bag_with_topics_and_service_events.mcap",
+    ] {
+        let out = std::process::Command::new("python3")
+            .arg(&script)
+            .arg(&summary.mcap_path)
+            .arg(rosbag2_fixture(fixture))
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        eprintln!("check_rosbag2_metadata.py vs {fixture}: {stdout}");
+        assert!(
+            out.status.success(),
+            "{stdout}{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+        assert_eq!(v["version"], 9);
+        assert_eq!(v["key_paths"], v["reference_key_paths"]);
+        assert_eq!(v["topics"].as_object().unwrap().len(), 6);
+    }
+}
+
+#[test]
+fn rosbag2_written_fixtures_read_with_the_bag_reader() {
+    for (file, topics, messages) in [
+        ("only_topics.mcap", 3, 7),
+        ("bag_with_topics_and_service_events.mcap", 5, 10),
+    ] {
+        let bag = Bag::open(&rosbag2_fixture(file)).unwrap();
+        assert_eq!(
+            bag.topics.len() + bag.skipped_topics.len(),
+            topics,
+            "{file}"
+        );
+        assert_eq!(bag.message_count(), messages, "{file}");
+        let pe = bag.topics.iter().find(|t| t.name == "/parameter_events");
+        if let Some(t) = pe {
+            assert_eq!(t.type_name, "rcl_interfaces/msg/ParameterEvent");
+            assert_eq!(
+                t.type_hash,
+                "RIHS01_043e627780fcad87a22d225bc2a037361dba713fca6a6b9f4b869a5aa0393204"
+            );
+        }
+        let names: Vec<&str> = bag.topics.iter().map(|t| t.name.as_str()).collect();
+        let read = bag.read(&names).unwrap();
+        assert_eq!(read.len() as u64, messages, "{file}");
+        assert!(read.windows(2).all(|w| w[0].log_time <= w[1].log_time));
+    }
+}

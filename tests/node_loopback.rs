@@ -85,6 +85,9 @@ impl Backend for TestBackend {
             OutputKind::FrameDiagnostics => {
                 RosType::new("sepmem_msgs/msg/FrameDiagnostics", "RIHS01_f")
             }
+            OutputKind::CollisionObjects => {
+                RosType::new("moveit_msgs/msg/CollisionObject", "RIHS01_c")
+            }
         }
     }
     fn diagnostics_type(&self) -> RosType {

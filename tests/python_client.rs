@@ -1,32 +1,31 @@
-//! An independent client against the real `sepmem node` executable:
-//! `tests/python/zenoh_client.py` (eclipse-zenoh + rosbags, no sepmem code)
-//! publishes PointCloud2 the rmw_zenoh way and decodes the node's
-//! MarkerArray and DiagnosticArray outputs. The node is then stopped with
-//! SIGINT and must exit cleanly. Skips visibly when python3 with `zenoh`,
-//! `rosbags` and `numpy` is not available.
+//! The independent ROS 2 conformance client (`tests/python/zenoh_client.py`:
+//! eclipse-zenoh + rosbags, no sepmem code) against the real executables:
+//! `sepmem node` fed by `sepmem play` (the synthetic ellipsoid bag) and by
+//! the client's own scripted stream. The client checks the graph tokens with
+//! rmw_zenoh's grammar, every endpoint's type, hash and QoS, the attachment
+//! of every sample (the player's clouds included), frames and stamps, the
+//! TRANSIENT_LOCAL late join (last mesh of every stream within 1 s), and the
+//! collision objects (ADD, MOVE, then REMOVE after eviction). The node is
+//! then stopped with SIGINT and must exit cleanly. Skips visibly when
+//! python3 with `zenoh`, `rosbags` and `numpy` is not available.
 #![allow(clippy::unwrap_used)]
 
-use std::process::{Command, Stdio};
+use std::io::{BufRead, BufReader, Read};
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 fn python_zenoh() -> bool {
     Command::new("python3")
-        .args(["-c", "import zenoh, rosbags, numpy"])
+        .args(["-c", "import zenoh, zenoh.ext, rosbags, numpy"])
         .output()
         .is_ok_and(|o| o.status.success())
 }
 
-#[test]
-fn python_zenoh_client_round_trips_through_the_node() {
-    if !python_zenoh() {
-        eprintln!(
-            "SKIPPED python_zenoh_client_round_trips_through_the_node: python3 with eclipse-zenoh, \
-             rosbags and numpy not found (pip install -r tests/python/requirements.txt)"
-        );
-        return;
-    }
-    let port = sepmem::transport::free_loopback_port().unwrap();
-    let mut node = Command::new(env!("CARGO_BIN_EXE_sepmem"))
+const PLAYED: &str = "/synth/ellipsoid/points";
+const SCRIPTED: &str = "/conformance/points";
+
+fn start_node(port: u16) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_sepmem"))
         .args([
             "--log",
             "info",
@@ -34,35 +33,26 @@ fn python_zenoh_client_round_trips_through_the_node() {
             "--set",
             &format!("node.transport.zenoh.listen=[\"tcp/127.0.0.1:{port}\"]"),
             "--set",
-            "node.topics=[\"/pyclient/**\"]",
+            "node.transport.zenoh.connect=[]",
             "--set",
-            "node.transport.node_name=\"sepmem_pytest\"",
+            &format!("node.topics=[\"{SCRIPTED}\", \"{PLAYED}\"]"),
+            "--set",
+            "node.transport.node_name=\"sepmem_conformance\"",
+            // The late joiner comes after the last frame: streams must still
+            // be alive then, and evicted (REMOVE) soon after.
+            "--set",
+            "node.evict_after_ms=6000",
+            "--set",
+            "node.diagnostics_period_ms=500",
         ])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .unwrap();
-    // Give the node a moment to listen (the client retries its connection too).
-    std::thread::sleep(Duration::from_millis(500));
-    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/zenoh_client.py");
-    let client = Command::new("python3")
-        .args([
-            script,
-            "--connect",
-            &format!("tcp/127.0.0.1:{port}"),
-            "--frames",
-            "3",
-            "--timeout",
-            "90",
-        ])
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&client.stdout).to_string();
-    eprintln!(
-        "client: {stdout}{}",
-        String::from_utf8_lossy(&client.stderr)
-    );
-    // Stop the node with SIGINT: graceful shutdown, exit status 0.
+        .unwrap()
+}
+
+/// Stop the node with SIGINT; returns (exit success, stdout).
+fn stop(mut node: Child) -> (bool, String) {
     let pid = node.id().to_string();
     Command::new("kill").args(["-INT", &pid]).status().unwrap();
     let t0 = Instant::now();
@@ -76,19 +66,98 @@ fn python_zenoh_client_round_trips_through_the_node() {
         }
         std::thread::sleep(Duration::from_millis(50));
     };
-    let out = node.wait_with_output().unwrap();
-    let node_out = String::from_utf8_lossy(&out.stdout).to_string();
+    let mut out = String::new();
+    node.stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut out)
+        .unwrap();
+    (status.success(), out)
+}
+
+#[test]
+fn conformance_client_passes_against_node_and_player() {
+    if !python_zenoh() {
+        eprintln!(
+            "SKIPPED conformance_client_passes_against_node_and_player: python3 with eclipse-zenoh, \
+             rosbags and numpy not found (pip install -r tests/python/requirements.txt)"
+        );
+        return;
+    }
+    let port = sepmem::transport::free_loopback_port().unwrap();
+    let node = start_node(port);
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/zenoh_client.py");
+    let mut client = Command::new("python3")
+        .args([
+            script,
+            "--connect",
+            &format!("tcp/127.0.0.1:{port}"),
+            "--node-name",
+            "sepmem_conformance",
+            "--player-name",
+            "sepmem_player",
+            "--played-topic",
+            PLAYED,
+            "--scripted-topic",
+            SCRIPTED,
+        ])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(client.stdout.take().unwrap()).lines();
+    let ready = lines.next().unwrap().unwrap();
+    assert_eq!(ready, "READY", "client: {ready}");
+    let bag = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/bags/synth_ellipsoid.mcap"
+    );
+    let play = Command::new(env!("CARGO_BIN_EXE_sepmem"))
+        .args([
+            "play",
+            bag,
+            "--topic",
+            PLAYED,
+            "--set",
+            &format!("node.transport.zenoh.connect=[\"tcp/127.0.0.1:{port}\"]"),
+            "--set",
+            "node.transport.zenoh.listen=[]",
+            "--set",
+            // The player names itself <node_name>_player.
+            "node.transport.node_name=\"sepmem\"",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        play.status.success(),
+        "sepmem play: {}",
+        String::from_utf8_lossy(&play.stderr)
+    );
+    let report: String = lines.map_while(Result::ok).collect::<Vec<_>>().join("\n");
+    let status = client.wait().unwrap();
+    eprintln!("client: {report}");
+    let (node_ok, node_out) = stop(node);
     eprintln!("node stdout:\n{node_out}");
-    assert!(status.success(), "node exit status {status}");
+    assert!(node_ok, "node exit status");
     assert!(
         node_out.contains("clean shutdown: true"),
         "node summary: {node_out}"
     );
-    assert!(client.status.success(), "client failed: {stdout}");
-    let v: serde_json::Value = serde_json::from_str(stdout.trim().lines().last().unwrap()).unwrap();
+    let v: serde_json::Value = serde_json::from_str(report.trim().lines().last().unwrap()).unwrap();
+    assert!(status.success(), "client failed: {report}");
     assert!(v["failures"].as_array().unwrap().is_empty());
-    assert!(v["marker_arrays_with_triangles"].as_u64().unwrap() >= 3);
-    assert!(v["triangles"].as_u64().unwrap() > 100);
-    let status = &v["status"]["values"];
-    assert!(status["frames"].as_str().unwrap().parse::<u64>().unwrap() >= 3);
+    // Measured outcomes the client reports (each also a failure if wrong).
+    assert!(v["samples_checked"].as_u64().unwrap() >= 30, "{v}");
+    assert!(v["headers_checked"].as_u64().unwrap() >= 20, "{v}");
+    for t in [SCRIPTED, PLAYED] {
+        assert!(v["late_join_s"][t].as_f64().unwrap() <= 1.0, "{v}");
+    }
+    let ops: Vec<u64> = v["collision_operations"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|o| o.as_u64().unwrap())
+        .collect();
+    assert_eq!(ops.first(), Some(&0), "ADD first: {ops:?}");
+    assert!(ops.contains(&3), "a MOVE: {ops:?}");
+    assert_eq!(ops.last(), Some(&1), "REMOVE last: {ops:?}");
 }

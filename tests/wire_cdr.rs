@@ -158,6 +158,43 @@ fn mesh() -> Mesh {
     }
 }
 
+fn collision_object() -> CollisionObject {
+    let pose = Pose {
+        position: p(0.1, -0.2, 1.5),
+        orientation: Quaternion::default(),
+    };
+    CollisionObject {
+        header: header(7, 8, "camera"),
+        pose,
+        id: "sepmem/seg/points#3".into(),
+        object_type: ObjectType {
+            key: "k".into(),
+            db: String::new(),
+        },
+        primitives: vec![SolidPrimitive {
+            kind: 1,
+            dimensions: vec![0.1, 0.2, 0.3],
+            polygon: Polygon {
+                points: vec![Point32 {
+                    x: 1.0,
+                    y: 2.0,
+                    z: 3.0,
+                }],
+            },
+        }],
+        primitive_poses: vec![pose],
+        meshes: vec![mesh()],
+        mesh_poses: vec![pose],
+        planes: vec![Plane {
+            coef: [0.0, 0.0, 1.0, -0.5],
+        }],
+        plane_poses: vec![pose],
+        subframe_names: vec!["tip".into()],
+        subframe_poses: vec![pose],
+        operation: CollisionObject::ADD,
+    }
+}
+
 fn surface_mesh() -> SurfaceMesh {
     SurfaceMesh {
         header: header(7, 8, "base_link"),
@@ -271,6 +308,7 @@ fn encodings_match_rosbags_byte_for_byte() {
     check("surface_mesh.cdr", &surface_mesh());
     check("frame_diagnostics.cdr", &frame_diagnostics());
     check("ground_truth.cdr", &ground_truth());
+    check("collision_object.cdr", &collision_object());
 }
 
 #[test]

@@ -112,37 +112,59 @@ fn scalar(s: &str) -> String {
     }
 }
 
-/// Render `metadata.yaml` (BagMetadata version 9) for one MCAP file.
-pub(crate) fn render_metadata(
+/// Render the bare BagMetadata map (version 9) for one MCAP file: `version`
+/// at its root, as rosbag2_storage_mcap writes it into the MCAP `rosbag2`
+/// metadata record (`YAML::Dump(convert<BagMetadata>::encode(metadata))`)
+/// and as its reader expects it (`node["version"].as<int>()`).
+pub(crate) fn render_bag_metadata(
     file: &str,
     start_ns: u64,
     duration_ns: u64,
     topics: &[TopicEntry<'_>],
 ) -> String {
     let total: u64 = topics.iter().map(|t| t.count).sum();
-    let mut s =
-        String::from("rosbag2_bagfile_information:\n  version: 9\n  storage_identifier: mcap\n");
+    let mut s = String::from("version: 9\nstorage_identifier: mcap\n");
     let _ = write!(
         s,
-        "  duration:\n    nanoseconds: {duration_ns}\n  starting_time:\n    nanoseconds_since_epoch: {start_ns}\n  message_count: {total}\n"
+        "duration:\n  nanoseconds: {duration_ns}\nstarting_time:\n  nanoseconds_since_epoch: {start_ns}\nmessage_count: {total}\n"
     );
-    s.push_str("  topics_with_message_count:\n");
+    if topics.is_empty() {
+        s.push_str("topics_with_message_count:\n  []\n");
+    } else {
+        s.push_str("topics_with_message_count:\n");
+    }
     for t in topics {
         let _ = write!(
             s,
-            "    - topic_metadata:\n        name: {}\n        type: {}\n        serialization_format: cdr\n        offered_qos_profiles:\n{}        type_description_hash: {}\n      message_count: {}\n",
+            "  - topic_metadata:\n      name: {}\n      type: {}\n      serialization_format: cdr\n      offered_qos_profiles:\n{}      type_description_hash: {}\n    message_count: {}\n",
             scalar(t.name),
             scalar(t.type_name),
-            t.qos.yaml_item("          "),
+            t.qos.yaml_item("        "),
             scalar(t.type_hash),
             t.count
         );
     }
     let _ = write!(
         s,
-        "  compression_format: ''\n  compression_mode: ''\n  relative_file_paths:\n    - {f}\n  files:\n    - path: {f}\n      starting_time:\n        nanoseconds_since_epoch: {start_ns}\n      duration:\n        nanoseconds: {duration_ns}\n      message_count: {total}\n  custom_data: ~\n  ros_distro: jazzy\n",
+        "compression_format: \"\"\ncompression_mode: \"\"\nrelative_file_paths:\n  - {f}\nfiles:\n  - path: {f}\n    starting_time:\n      nanoseconds_since_epoch: {start_ns}\n    duration:\n      nanoseconds: {duration_ns}\n    message_count: {total}\ncustom_data: ~\nros_distro: jazzy\n",
         f = scalar(file)
     );
+    s
+}
+
+/// Render `metadata.yaml` of a bag directory: the same map as
+/// [`render_bag_metadata`] under the `rosbag2_bagfile_information` key
+/// (`rosbag2_storage/metadata_io.cpp`).
+pub(crate) fn render_metadata(
+    file: &str,
+    start_ns: u64,
+    duration_ns: u64,
+    topics: &[TopicEntry<'_>],
+) -> String {
+    let mut s = String::from("rosbag2_bagfile_information:\n");
+    for line in render_bag_metadata(file, start_ns, duration_ns, topics).lines() {
+        let _ = writeln!(s, "  {line}");
+    }
     s
 }
 

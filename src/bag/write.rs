@@ -5,7 +5,7 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-use super::metadata::{render_metadata, Qos, TopicEntry};
+use super::metadata::{render_bag_metadata, render_metadata, Qos, TopicEntry};
 use super::BagError;
 use crate::wire::{self, msgdef, msgs, RosMessage};
 
@@ -228,9 +228,11 @@ impl BagWriter {
                 count: t.count,
             })
             .collect();
-        let yaml = render_metadata(&file_name, start, duration, &entries);
         let mut meta = BTreeMap::new();
-        meta.insert("serialized_metadata".to_string(), yaml.clone());
+        meta.insert(
+            "serialized_metadata".to_string(),
+            render_bag_metadata(&file_name, start, duration, &entries),
+        );
         self.writer
             .write_metadata(&mcap::records::Metadata {
                 name: "rosbag2".to_string(),
@@ -243,6 +245,7 @@ impl BagWriter {
         let metadata_path = match &self.dir {
             Some(dir) => {
                 let p = dir.join("metadata.yaml");
+                let yaml = render_metadata(&file_name, start, duration, &entries);
                 std::fs::write(&p, yaml).map_err(|source| BagError::Io {
                     path: p.clone(),
                     source,

@@ -13,8 +13,11 @@ use super::stats::Level;
 use crate::transport::RosType;
 use std::time::{Duration, Instant};
 
-/// The per-frame outputs a processor can produce.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+/// The per-frame outputs a processor can produce (config names in snake_case).
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
 pub enum OutputKind {
     /// `visualization_msgs/MarkerArray` (TRIANGLE_LIST per object, DELETEALL first).
     Markers,
@@ -22,14 +25,17 @@ pub enum OutputKind {
     Mesh,
     /// sepmem's per-frame diagnostics message.
     FrameDiagnostics,
+    /// `moveit_msgs/CollisionObject` (ADD / MOVE / REMOVE per object).
+    CollisionObjects,
 }
 
 impl OutputKind {
     /// All kinds, in publication order.
-    pub const ALL: [OutputKind; 3] = [
+    pub const ALL: [OutputKind; 4] = [
         OutputKind::Mesh,
         OutputKind::Markers,
         OutputKind::FrameDiagnostics,
+        OutputKind::CollisionObjects,
     ];
 }
 

@@ -69,15 +69,34 @@ pub struct OutputTopics {
     pub frame_diagnostics: String,
     /// DiagnosticArray topic (about 1 Hz, all streams).
     pub diagnostics: String,
+    /// MoveIt collision objects (`None`: not published).
+    pub collision_objects: Option<crate::pipeline::collision::CollisionConfig>,
+    /// Outputs published TRANSIENT_LOCAL for late joiners (`None`: all VOLATILE).
+    pub transient_local: Option<TransientLocal>,
+}
+
+/// TRANSIENT_LOCAL outputs (`node.outputs.transient_local`): each publisher
+/// keeps its last `depth` samples in a zenoh-ext advanced-publisher cache,
+/// as rmw_zenoh does, and advertises the durability in its token's QoS.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransientLocal {
+    /// Which outputs.
+    pub outputs: Vec<OutputKind>,
+    /// Samples kept per publisher (the advertised KEEP_LAST depth).
+    pub depth: u32,
 }
 
 impl OutputTopics {
-    /// The template for one output kind.
-    pub fn template(&self, kind: OutputKind) -> &str {
+    /// The template for one output kind (`None`: that output is off).
+    pub fn template(&self, kind: OutputKind) -> Option<&str> {
         match kind {
-            OutputKind::Markers => &self.markers,
-            OutputKind::Mesh => &self.mesh,
-            OutputKind::FrameDiagnostics => &self.frame_diagnostics,
+            OutputKind::Markers => Some(&self.markers),
+            OutputKind::Mesh => Some(&self.mesh),
+            OutputKind::FrameDiagnostics => Some(&self.frame_diagnostics),
+            OutputKind::CollisionObjects => {
+                self.collision_objects.as_ref().map(|c| c.topic.as_str())
+            }
         }
     }
 }
@@ -131,6 +150,31 @@ impl NodeConfig {
         }
     }
 
+    /// The QoS of one output kind: [`NodeConfig::output_qos`], made
+    /// TRANSIENT_LOCAL with KEEP_LAST(depth) when `outputs.transient_local`
+    /// lists it.
+    pub fn output_qos_of(&self, kind: OutputKind) -> crate::transport::liveliness::Qos {
+        use crate::transport::liveliness::{Durability, Qos};
+        match &self.outputs.transient_local {
+            Some(tl) if tl.outputs.contains(&kind) => Qos {
+                durability: Durability::TransientLocal,
+                keep_last: Some(tl.depth),
+                ..self.output_qos()
+            },
+            _ => self.output_qos(),
+        }
+    }
+
+    /// Configured input topics without wildcards (their subscriptions are
+    /// declared at start, before any sample).
+    pub fn exact_topics(&self) -> Vec<String> {
+        self.topics
+            .iter()
+            .filter(|t| !t.contains('*'))
+            .map(|t| format!("/{}", t.trim_matches('/')))
+            .collect()
+    }
+
     /// The rayon pool the frames are computed on (`compute_threads`, 0 = one
     /// per core), so that compute never runs on the transport's threads.
     ///
@@ -170,6 +214,25 @@ impl NodeConfig {
         }
         if let Some(share) = &self.compute_share {
             share.validate().map_err(NodeError::Config)?;
+        }
+        if let Some(tl) = &self.outputs.transient_local {
+            if tl.depth == 0 {
+                return Err(NodeError::Config(
+                    "node.outputs.transient_local.depth must be > 0".into(),
+                ));
+            }
+        }
+        if let Some(c) = &self.outputs.collision_objects {
+            if c.max_triangles < 4 {
+                return Err(NodeError::Config(
+                    "node.outputs.collision_objects.max_triangles must be >= 4".into(),
+                ));
+            }
+            if c.move_tolerance_m.is_nan() || c.move_tolerance_m < 0.0 {
+                return Err(NodeError::Config(
+                    "node.outputs.collision_objects.move_tolerance_m must be >= 0".into(),
+                ));
+            }
         }
         Ok(())
     }

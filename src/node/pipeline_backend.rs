@@ -20,10 +20,11 @@ use crate::pipeline::objects::{cap_objects, Entry, ObjectBook, Quality};
 use crate::pipeline::{
     outputs, Deadlines, FrameResult as PipelineResult, Membranes, PipelineConfig, StartPath,
 };
+use crate::pipeline::collision::{CollisionConfig, CollisionObjects};
 use crate::transport::RosType;
 use crate::wire::msgs::{
-    DiagnosticArray, DiagnosticStatus, FrameDiagnostics, Header, KeyValue, Marker, MarkerArray,
-    PointCloud2, SurfaceMesh, Time,
+    CollisionObject, DiagnosticArray, DiagnosticStatus, FrameDiagnostics, Header, KeyValue, Marker,
+    MarkerArray, PointCloud2, SurfaceMesh, Time,
 };
 use crate::wire::pointcloud2::WireConfig;
 use crate::wire::{self, RosMessage};
@@ -40,6 +41,7 @@ pub struct PipelineBackend {
     membranes: Membranes,
     pipeline: PipelineConfig,
     limits: WireConfig,
+    collision: Option<CollisionConfig>,
 }
 
 impl PipelineBackend {
@@ -56,7 +58,14 @@ impl PipelineBackend {
             membranes: Membranes::new(membrane, &pipeline)?,
             pipeline,
             limits,
+            collision: None,
         })
+    }
+
+    /// Also publish MoveIt collision objects (`node.outputs.collision_objects`).
+    pub fn with_collision_objects(mut self, collision: Option<CollisionConfig>) -> Self {
+        self.collision = collision;
+        self
     }
 
     /// A backend from the whole configuration.
@@ -64,7 +73,10 @@ impl PipelineBackend {
     /// # Errors
     /// [`ConfigError`] naming the first bad membrane key.
     pub fn from_config(cfg: &crate::config::Config) -> Result<Self, ConfigError> {
-        Self::new(&cfg.membrane, cfg.pipeline.clone(), cfg.wire.clone())
+        Ok(
+            Self::new(&cfg.membrane, cfg.pipeline.clone(), cfg.wire.clone())?
+                .with_collision_objects(cfg.node.outputs.collision_objects.clone()),
+        )
     }
 }
 
@@ -75,6 +87,7 @@ struct EngineProcessor {
     objects: ObjectBook,
     ns: String,
     last_header: Header,
+    collision: Option<CollisionObjects>,
 }
 
 /// The deadlines of a frame whose node deadline is `deadline` (from its
@@ -124,7 +137,7 @@ impl EngineProcessor {
         r: &PipelineResult,
         sample: &DecodedSample,
         out: &mut FrameOut,
-    ) {
+    ) -> bool {
         let rep = &r.reconstruction.report;
         let verdict = entry.verdict(r, &self.pipeline.objects);
         let (mesh, marker, shown) = entry.publish(
@@ -167,6 +180,25 @@ impl EngineProcessor {
             ),
             quality: Some(shown.as_str()),
         });
+        verdict.is_fitted()
+    }
+}
+
+impl EngineProcessor {
+    /// MoveIt collision objects of the frame's fitted surfaces (ADD or
+    /// MOVE), then REMOVE for the objects no longer tracked; an unfitted
+    /// surface never reaches the planning scene.
+    fn collision_objects(&mut self, fitted: &[PipelineResult], header: &Header, out: &mut FrameOut) {
+        let Some(co) = self.collision.as_mut() else {
+            return;
+        };
+        let refs: Vec<&PipelineResult> = fitted.iter().collect();
+        let objects = &self.objects;
+        let (msgs, errs) = co.frame(&refs, header, |s| objects.contains_stream(s));
+        for m in &msgs {
+            out.encode(OutputKind::CollisionObjects, m);
+        }
+        out.errors.extend(errs);
     }
 }
 
@@ -204,9 +236,14 @@ impl TopicProcessor for EngineProcessor {
                     .process_by(&s.cloud, membranes, pipeline, deadlines)
             })
             .collect();
+        let mut fitted = Vec::new();
         for ((mut entry, _), outcome) in work.into_iter().zip(outcomes) {
             match outcome {
-                Ok(r) => self.emit(&mut entry, &r, &sample, &mut out),
+                Ok(r) => {
+                    if self.emit(&mut entry, &r, &sample, &mut out) {
+                        fitted.push(r);
+                    }
+                }
                 Err(e) => {
                     reasons::bump(&mut out.counts, reasons::OBJECT_ERRORS, 1);
                     out.errors.push(e.to_string());
@@ -225,6 +262,7 @@ impl TopicProcessor for EngineProcessor {
         let markers =
             outputs::cleared_markers(std::mem::take(&mut out.markers), &sample.header, &self.ns);
         out.encode(OutputKind::Markers, &markers);
+        self.collision_objects(&fitted, &sample.header, &mut out);
         FrameResult {
             outputs: out.outputs,
             objects: out.objects,
@@ -239,15 +277,17 @@ impl TopicProcessor for EngineProcessor {
     }
 
     fn on_evict(&mut self) -> Vec<Output> {
-        let markers = outputs::marker_array(&[], &self.last_header, &self.ns);
-        wire::encode(&markers)
-            .map(|payload| {
-                vec![Output {
-                    kind: OutputKind::Markers,
-                    payload,
-                }]
-            })
-            .unwrap_or_default()
+        let mut out = FrameOut::default();
+        out.encode(
+            OutputKind::Markers,
+            &outputs::marker_array(&[], &self.last_header, &self.ns),
+        );
+        if let Some(co) = self.collision.as_mut() {
+            for m in co.retain(&self.last_header, |_| false) {
+                out.encode(OutputKind::CollisionObjects, &m);
+            }
+        }
+        out.outputs
     }
 }
 
@@ -261,6 +301,7 @@ impl Backend for PipelineBackend {
             OutputKind::Markers => ty::<MarkerArray>(),
             OutputKind::Mesh => ty::<SurfaceMesh>(),
             OutputKind::FrameDiagnostics => ty::<FrameDiagnostics>(),
+            OutputKind::CollisionObjects => ty::<CollisionObject>(),
         }
     }
 
@@ -292,6 +333,7 @@ impl Backend for PipelineBackend {
             objects: ObjectBook::default(),
             ns: self.pipeline.marker_namespace.clone(),
             last_header: Header::default(),
+            collision: self.collision.clone().map(CollisionObjects::new),
         })
     }
 

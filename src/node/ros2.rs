@@ -238,7 +238,10 @@ pub fn run(
             }
             let mut pubs = BTreeMap::new();
             for kind in OutputKind::ALL {
-                let out = expand_topic_template(cfg.outputs.template(kind), &topic);
+                let Some(template) = cfg.outputs.template(kind) else {
+                    continue;
+                };
+                let out = expand_topic_template(template, &topic);
                 let p = node
                     .create_publisher_untyped(
                         &out,

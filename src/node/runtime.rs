@@ -225,6 +225,7 @@ where
             .await?;
         subscribers.push(sub);
     }
+    let early_tokens = declare_exact_subscriptions(&participant, cfg, &input_type).await;
     let diag_topic = expand_topic_template(&cfg.outputs.diagnostics, "/");
     let diag_pub = participant
         .publisher(
@@ -299,8 +300,39 @@ where
     if let Err(e) = diag_pub.undeclare().await {
         tracing::warn!(error = %e, "undeclaring /diagnostics publisher");
     }
+    for t in early_tokens {
+        if let Err(e) = t.undeclare().await {
+            tracing::warn!(error = %e, "undeclaring subscription token");
+        }
+    }
     participant.close().await?;
     Ok(summary)
+}
+
+/// `MS` tokens for the configured topics without wildcards, declared at
+/// start so that the graph (`ros2 topic info`) shows the subscription before
+/// any sample arrives; streams of these topics then declare none of their own.
+async fn declare_exact_subscriptions(
+    participant: &Participant,
+    cfg: &NodeConfig,
+    input_type: &crate::transport::RosType,
+) -> Vec<crate::transport::EntityToken> {
+    let mut tokens = Vec::new();
+    for topic in cfg.exact_topics() {
+        match participant
+            .declare_entity(
+                EntityKind::Subscription,
+                &topic,
+                input_type,
+                Qos::SENSOR_DATA,
+            )
+            .await
+        {
+            Ok(t) => tokens.push(t),
+            Err(e) => tracing::warn!(%topic, error = %e, "cannot declare subscription token"),
+        }
+    }
+    tokens
 }
 
 fn on_sample(shared: &Shared, r: Received, deadline: Duration) {
@@ -462,18 +494,14 @@ async fn stream_task(mut ctx: StreamCtx) -> bool {
     clean
 }
 
-/// The stream's subscription token and output publishers.
-async fn declare_stream(ctx: &StreamCtx) -> (Option<EntityToken>, Publishers) {
-    let topic = &ctx.topic;
-    let tr = &ctx.cfg.transport;
-    let token = match ctx
+async fn declare_stream_subscription(
+    ctx: &StreamCtx,
+    topic: &str,
+) -> Option<crate::transport::EntityToken> {
+    let ty = ctx.cfg.transport.advertised(&ctx.backend.input_type());
+    match ctx
         .participant
-        .declare_entity(
-            EntityKind::Subscription,
-            topic,
-            &tr.advertised(&ctx.backend.input_type()),
-            Qos::SENSOR_DATA,
-        )
+        .declare_entity(EntityKind::Subscription, topic, &ty, Qos::SENSOR_DATA)
         .await
     {
         Ok(t) => Some(t),
@@ -481,14 +509,29 @@ async fn declare_stream(ctx: &StreamCtx) -> (Option<EntityToken>, Publishers) {
             tracing::warn!(%topic, error = %e, "cannot declare subscription token");
             None
         }
+    }
+}
+
+/// The stream's subscription token (none for an exact topic: it has had
+/// its token since start, see `run`) and output publishers.
+async fn declare_stream(ctx: &StreamCtx) -> (Option<EntityToken>, Publishers) {
+    let topic = &ctx.topic;
+    let tr = &ctx.cfg.transport;
+    let token = if ctx.cfg.exact_topics().contains(topic) {
+        None
+    } else {
+        declare_stream_subscription(ctx, topic).await
     };
     let mut pubs = Publishers::new();
     for kind in OutputKind::ALL {
-        let out = expand_topic_template(ctx.cfg.outputs.template(kind), topic);
+        let Some(template) = ctx.cfg.outputs.template(kind) else {
+            continue;
+        };
+        let out = expand_topic_template(template, topic);
         let ty = tr.advertised(&ctx.backend.output_type(kind));
         match ctx
             .participant
-            .publisher(&out, &ty, ctx.cfg.output_qos())
+            .publisher(&out, &ty, ctx.cfg.output_qos_of(kind))
             .await
         {
             Ok(p) => {

@@ -23,6 +23,7 @@
 //! [`crate::eval`].
 
 pub mod align;
+pub mod collision;
 pub mod engine;
 pub mod objects;
 pub mod outputs;

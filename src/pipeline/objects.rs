@@ -248,6 +248,11 @@ impl ObjectBook {
         self.entries.insert(entry.tracker.key().clone(), entry);
     }
 
+    /// Whether the object of `stream` (its `StreamKey` as text) is tracked.
+    pub fn contains_stream(&self, stream: &str) -> bool {
+        self.entries.keys().any(|k| k.to_string() == stream)
+    }
+
     /// Objects held.
     pub fn len(&self) -> usize {
         self.entries.len()

@@ -9,14 +9,26 @@
 //! publisher's liveliness key) and declare an `MP` token; subscriptions
 //! created by [`Participant::subscribe`] deliver [`Received`] samples with
 //! their topic and decoded attachment to a callback.
+//!
+//! A TRANSIENT_LOCAL publisher is a zenoh-ext `AdvancedPublisher` with a
+//! cache of `depth` samples, publisher detection and (when RELIABLE)
+//! sample-miss heartbeats, as in rmw_zenoh's `rmw_publisher_data.cpp`: an
+//! rmw_zenoh TRANSIENT_LOCAL subscription (an `AdvancedSubscriber` that
+//! detects late publishers) then queries that cache when it joins.
 
 use super::attachment::{gid_of_liveliness_key, now_ns, Attachment, AttachmentError};
 use super::keys::{KeyError, KeyMapper, KeyMode, RosType};
-use super::liveliness::{EntityKind, Qos, Reliability, Token, TopicToken};
+use super::liveliness::{Durability, EntityKind, Qos, Reliability, Token, TopicToken};
 use super::{TransportConfig, TransportError};
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
 use std::sync::Arc;
 use zenoh::Wait;
+use zenoh_ext::AdvancedPublisherBuilderExt;
+
+/// Heartbeat period of RELIABLE + TRANSIENT_LOCAL publishers (sample-miss detection).
+const HEARTBEAT: std::time::Duration = std::time::Duration::from_millis(500);
+/// Cache of a TRANSIENT_LOCAL + KEEP_ALL publisher (bounded all the same).
+const KEEP_ALL_CACHE: usize = 100;
 
 fn zerr(what: impl Into<String>) -> impl FnOnce(zenoh::Error) -> TransportError {
     let what = what.into();
@@ -63,6 +75,9 @@ pub fn zenoh_config(cfg: &TransportConfig) -> Result<zenoh::Config, TransportErr
     if let Some(n) = z.max_message_bytes {
         set(&mut c, "transport/link/rx/max_message_size", n.to_string())?;
     }
+    // As rmw_zenoh's session config: samples carry timestamps, which the
+    // advanced publisher cache (TRANSIENT_LOCAL) and subscribers rely on.
+    set(&mut c, "timestamping/enabled", "true".to_string())?;
     Ok(c)
 }
 
@@ -261,12 +276,33 @@ impl Participant {
         } else {
             zenoh::qos::CongestionControl::Drop
         };
-        let publisher = self
+        let builder = self
             .session
             .declare_publisher(key.clone())
-            .congestion_control(congestion)
-            .await
-            .map_err(zerr(format!("declaring publisher {key}")))?;
+            .congestion_control(congestion);
+        let publisher = if qos.durability == Durability::TransientLocal {
+            let depth = qos.keep_last.map_or(KEEP_ALL_CACHE, |d| {
+                usize::try_from(d).unwrap_or(KEEP_ALL_CACHE)
+            });
+            let mut b = builder
+                .cache(zenoh_ext::CacheConfig::default().max_samples(depth))
+                .publisher_detection();
+            if qos.reliability == Reliability::Reliable {
+                b = b.sample_miss_detection(
+                    zenoh_ext::MissDetectionConfig::default().heartbeat(HEARTBEAT),
+                );
+            }
+            Sink::Advanced(
+                b.await
+                    .map_err(zerr(format!("declaring advanced publisher {key}")))?,
+            )
+        } else {
+            Sink::Plain(
+                builder
+                    .await
+                    .map_err(zerr(format!("declaring publisher {key}")))?,
+            )
+        };
         Ok(RosPublisher {
             publisher,
             token,
@@ -336,9 +372,15 @@ impl Participant {
     }
 }
 
+/// A plain zenoh publisher (VOLATILE) or an advanced one with a cache (TRANSIENT_LOCAL).
+enum Sink {
+    Plain(zenoh::pubsub::Publisher<'static>),
+    Advanced(zenoh_ext::AdvancedPublisher<'static>),
+}
+
 /// A publisher that stamps rmw_zenoh attachments (in ros2 mode).
 pub struct RosPublisher {
-    publisher: zenoh::pubsub::Publisher<'static>,
+    publisher: Sink,
     token: EntityToken,
     gid: [u8; 16],
     seq: AtomicI64,
@@ -385,12 +427,12 @@ impl RosPublisher {
     /// # Errors
     /// [`TransportError::Zenoh`] if zenoh refuses the put.
     pub async fn put(&self, payload: Vec<u8>) -> Result<(), TransportError> {
-        let b = self.publisher.put(payload);
-        let b = match self.next_attachment() {
-            Some(a) => b.attachment(a),
-            None => b,
-        };
-        b.await.map_err(zerr(format!("put on {}", self.key)))
+        let attachment = self.next_attachment();
+        match &self.publisher {
+            Sink::Plain(p) => p.put(payload).attachment(attachment).await,
+            Sink::Advanced(p) => p.put(payload).attachment(attachment).await,
+        }
+        .map_err(zerr(format!("put on {}", self.key)))
     }
 
     /// Put one serialized message without awaiting (zenoh puts do not block
@@ -399,12 +441,12 @@ impl RosPublisher {
     /// # Errors
     /// [`TransportError::Zenoh`] if zenoh refuses the put.
     pub fn put_sync(&self, payload: Vec<u8>) -> Result<(), TransportError> {
-        let b = self.publisher.put(payload);
-        let b = match self.next_attachment() {
-            Some(a) => b.attachment(a),
-            None => b,
-        };
-        b.wait().map_err(zerr(format!("put on {}", self.key)))
+        let attachment = self.next_attachment();
+        match &self.publisher {
+            Sink::Plain(p) => p.put(payload).attachment(attachment).wait(),
+            Sink::Advanced(p) => p.put(payload).attachment(attachment).wait(),
+        }
+        .map_err(zerr(format!("put on {}", self.key)))
     }
 
     /// Undeclare the publisher and its token.
@@ -413,9 +455,10 @@ impl RosPublisher {
     /// [`TransportError::Zenoh`] if zenoh fails.
     pub async fn undeclare(self) -> Result<(), TransportError> {
         self.token.undeclare().await?;
-        self.publisher
-            .undeclare()
-            .await
-            .map_err(zerr("undeclaring publisher"))
+        match self.publisher {
+            Sink::Plain(p) => p.undeclare().await,
+            Sink::Advanced(p) => p.undeclare().await,
+        }
+        .map_err(zerr("undeclaring publisher"))
     }
 }

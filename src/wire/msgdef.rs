@@ -4,7 +4,9 @@
 //!
 //! * [`definition_text`] holds the `.msg` text of every type in the registry:
 //!   the standard types (as shipped by ROS 2 Jazzy, comments removed) and
-//!   sepmem's own messages (embedded verbatim from `msg/msg/*.msg`).
+//!   sepmem's own messages (embedded verbatim from `msg/msg/*.msg`) and
+//!   MoveIt's `CollisionObject` with `ObjectType` (embedded verbatim from
+//!   `msg/third_party/`, see its README for sources and licences).
 //! * [`parse_msg`] parses one `.msg` text into fields and constants.
 //! * [`rihs01`] computes a type hash by the reference algorithm of
 //!   `rosidl_generator_type_description` (type description JSON, default
@@ -85,6 +87,25 @@ const DEFINITIONS: &[(&str, &str)] = &[
     (
         "shape_msgs/msg/Mesh",
         "MeshTriangle[] triangles\ngeometry_msgs/Point[] vertices\n",
+    ),
+    ("geometry_msgs/msg/Point32", "float32 x\nfloat32 y\nfloat32 z\n"),
+    ("geometry_msgs/msg/Polygon", "Point32[] points\n"),
+    (
+        "shape_msgs/msg/SolidPrimitive",
+        "uint8 BOX=1\nuint8 SPHERE=2\nuint8 CYLINDER=3\nuint8 CONE=4\nuint8 PRISM=5\n\n\
+         uint8 type\n\nfloat64[<=3] dimensions\n\nuint8 BOX_X=0\nuint8 BOX_Y=1\nuint8 BOX_Z=2\n\n\
+         uint8 SPHERE_RADIUS=0\n\nuint8 CYLINDER_HEIGHT=0\nuint8 CYLINDER_RADIUS=1\n\n\
+         uint8 CONE_HEIGHT=0\nuint8 CONE_RADIUS=1\n\nuint8 PRISM_HEIGHT=0\n\n\
+         geometry_msgs/Polygon polygon\n",
+    ),
+    ("shape_msgs/msg/Plane", "float64[4] coef\n"),
+    (
+        "object_recognition_msgs/msg/ObjectType",
+        include_str!("../../msg/third_party/object_recognition_msgs/msg/ObjectType.msg"),
+    ),
+    (
+        "moveit_msgs/msg/CollisionObject",
+        include_str!("../../msg/third_party/moveit_msgs/msg/CollisionObject.msg"),
     ),
     ("diagnostic_msgs/msg/KeyValue", "string key\nstring value\n"),
     (

@@ -303,6 +303,95 @@ pub struct Mesh {
     pub vertices: Vec<Point>,
 }
 
+/// geometry_msgs/msg/Point32.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Point32 {
+    /// X.
+    pub x: f32,
+    /// Y.
+    pub y: f32,
+    /// Z.
+    pub z: f32,
+}
+
+/// geometry_msgs/msg/Polygon.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Polygon {
+    /// Corners.
+    pub points: Vec<Point32>,
+}
+
+/// shape_msgs/msg/SolidPrimitive.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SolidPrimitive {
+    /// BOX=1, SPHERE=2, CYLINDER=3, CONE=4, PRISM=5.
+    #[serde(rename = "type")]
+    pub kind: u8,
+    /// Dimensions (at most 3).
+    pub dimensions: Vec<f64>,
+    /// Prism base polygon.
+    pub polygon: Polygon,
+}
+
+/// shape_msgs/msg/Plane.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Plane {
+    /// ax + by + cz + d = 0.
+    pub coef: [f64; 4],
+}
+
+/// object_recognition_msgs/msg/ObjectType.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ObjectType {
+    /// Key of the object in its database.
+    pub key: String,
+    /// Database parameters.
+    pub db: String,
+}
+
+/// moveit_msgs/msg/CollisionObject (`ros2` branch).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct CollisionObject {
+    /// Frame and stamp the pose is relative to.
+    pub header: Header,
+    /// Object pose; shapes are relative to it.
+    pub pose: Pose,
+    /// Object id (name in MoveIt's planning scene).
+    pub id: String,
+    /// Database type.
+    #[serde(rename = "type")]
+    pub object_type: ObjectType,
+    /// Solid primitives.
+    pub primitives: Vec<SolidPrimitive>,
+    /// Their poses.
+    pub primitive_poses: Vec<Pose>,
+    /// Meshes.
+    pub meshes: Vec<Mesh>,
+    /// Their poses.
+    pub mesh_poses: Vec<Pose>,
+    /// Planes.
+    pub planes: Vec<Plane>,
+    /// Their poses.
+    pub plane_poses: Vec<Pose>,
+    /// Subframe names.
+    pub subframe_names: Vec<String>,
+    /// Subframe poses.
+    pub subframe_poses: Vec<Pose>,
+    /// ADD, REMOVE, APPEND or MOVE.
+    pub operation: u8,
+}
+
+impl CollisionObject {
+    /// Add the object (replacing an object of the same id).
+    pub const ADD: u8 = 0;
+    /// Remove the object.
+    pub const REMOVE: u8 = 1;
+    /// Append shapes to an existing object.
+    pub const APPEND: u8 = 2;
+    /// Move an existing object (geometry arrays empty).
+    pub const MOVE: u8 = 3;
+}
+
 /// diagnostic_msgs/msg/KeyValue.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct KeyValue {
@@ -556,6 +645,37 @@ ros_message!(
     "RIHS01_2eb2d504d144086cb5f775b10c332339b62e324b794e06e869bb21bcebbf0de4"
 );
 
+ros_message!(
+    Point32,
+    "geometry_msgs/msg/Point32",
+    "RIHS01_2fc4db7cae16a4582c79a56b66173a8d48d52c7dc520ddc55a0d4bcf2a4bfdbc"
+);
+ros_message!(
+    Polygon,
+    "geometry_msgs/msg/Polygon",
+    "RIHS01_3782f9f0bf044964d692d6c017d705e37611afb1f0bf6a9dee248a7dda0f784a"
+);
+ros_message!(
+    SolidPrimitive,
+    "shape_msgs/msg/SolidPrimitive",
+    "RIHS01_2802a15190aadc3f496584df4b0b4c5824d8a0b31aaef839faa75bc34dda38ac"
+);
+ros_message!(
+    Plane,
+    "shape_msgs/msg/Plane",
+    "RIHS01_dfbfe8314689c850615d4a727af017e9aa86c10e369a606c8c851ef8f16c58c8"
+);
+ros_message!(
+    ObjectType,
+    "object_recognition_msgs/msg/ObjectType",
+    "RIHS01_5eb3ee3976403366d7c50d7dbee8bec96b3bced1e752674a7194a35841632134"
+);
+ros_message!(
+    CollisionObject,
+    "moveit_msgs/msg/CollisionObject",
+    "RIHS01_74b0acd6d56be032bf4f764b2c2633f50588b5fb2bd71e97206c59052747cf7e"
+);
+
 /// `(type name, RIHS01)` of every message type above, for lookups by name.
 pub const TYPE_HASHES: &[(&str, &str)] = &[
     (Time::TYPE_NAME, Time::TYPE_HASH),
@@ -581,6 +701,12 @@ pub const TYPE_HASHES: &[(&str, &str)] = &[
     (SurfaceMesh::TYPE_NAME, SurfaceMesh::TYPE_HASH),
     (FrameDiagnostics::TYPE_NAME, FrameDiagnostics::TYPE_HASH),
     (GroundTruth::TYPE_NAME, GroundTruth::TYPE_HASH),
+    (Point32::TYPE_NAME, Point32::TYPE_HASH),
+    (Polygon::TYPE_NAME, Polygon::TYPE_HASH),
+    (SolidPrimitive::TYPE_NAME, SolidPrimitive::TYPE_HASH),
+    (Plane::TYPE_NAME, Plane::TYPE_HASH),
+    (ObjectType::TYPE_NAME, ObjectType::TYPE_HASH),
+    (CollisionObject::TYPE_NAME, CollisionObject::TYPE_HASH),
 ];
 
 /// The hard-coded RIHS01 hash of a registered type.

@@ -25,6 +25,10 @@ own = {}
 for name in ('SurfaceMesh', 'FrameDiagnostics', 'GroundTruth'):
     text = (ROOT / 'msg' / 'msg' / f'{name}.msg').read_text()
     own.update(get_types_from_msg(text, f'sepmem_msgs/msg/{name}'))
+for name in ('moveit_msgs/msg/CollisionObject', 'object_recognition_msgs/msg/ObjectType'):
+    pkg, _, ty = name.split('/')
+    text = (ROOT / 'msg' / 'third_party' / pkg / 'msg' / f'{ty}.msg').read_text()
+    own.update(get_types_from_msg(text, name))
 ts.register(own)
 
 T = ts.types
@@ -137,6 +141,23 @@ def surface_mesh():
                        quality=3)
 
 
+def collision_object():
+    C = T['moveit_msgs/msg/CollisionObject']
+    Prim = T['shape_msgs/msg/SolidPrimitive']
+    Polygon = T['geometry_msgs/msg/Polygon']
+    Point32 = T['geometry_msgs/msg/Point32']
+    Plane = T['shape_msgs/msg/Plane']
+    ObjectType = T['object_recognition_msgs/msg/ObjectType']
+    pose = Pose(position=Point(x=0.1, y=-0.2, z=1.5), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
+    return C(header=header(7, 8, 'camera'), pose=pose, id='sepmem/seg/points#3',
+             type=ObjectType(key='k', db=''),
+             primitives=[Prim(type=1, dimensions=np.array([0.1, 0.2, 0.3]),
+                              polygon=Polygon(points=[Point32(x=1.0, y=2.0, z=3.0)]))],
+             primitive_poses=[pose], meshes=[mesh()], mesh_poses=[pose],
+             planes=[Plane(coef=np.array([0.0, 0.0, 1.0, -0.5]))], plane_poses=[pose],
+             subframe_names=['tip'], subframe_poses=[pose], operation=0)
+
+
 def frame_diagnostics():
     return FrameDiagnostics(header=header(7, 8, 'base_link'), stream_id='/seg/points#3',
                             frame_index=41, points_in=20000, points_used=19876, points_dropped=124,
@@ -166,6 +187,7 @@ def main():
         ('surface_mesh', surface_mesh(), True),
         ('frame_diagnostics', frame_diagnostics(), True),
         ('ground_truth', ground_truth(), True),
+        ('collision_object', collision_object(), True),
     ]
     for name, msg, le in samples:
         data = bytes(ts.serialize_cdr(msg, msg.__msgtype__, little_endian=le))
@@ -183,7 +205,9 @@ def main():
         'shape_msgs/msg/Mesh', 'shape_msgs/msg/MeshTriangle', 'diagnostic_msgs/msg/KeyValue',
         'diagnostic_msgs/msg/DiagnosticStatus', 'diagnostic_msgs/msg/DiagnosticArray',
         'sepmem_msgs/msg/SurfaceMesh', 'sepmem_msgs/msg/FrameDiagnostics',
-        'sepmem_msgs/msg/GroundTruth'})
+        'sepmem_msgs/msg/GroundTruth', 'geometry_msgs/msg/Point32', 'geometry_msgs/msg/Polygon',
+        'shape_msgs/msg/SolidPrimitive', 'shape_msgs/msg/Plane', 'object_recognition_msgs/msg/ObjectType',
+        'moveit_msgs/msg/CollisionObject'})
     table = {t: {'rihs01': ts.hash_rihs01(t), 'msgdef': ts.generate_msgdef(t, ros_version=2)[0]}
              for t in types}
     (OUT / 'rosbags_types.json').write_text(json.dumps(table, indent=1, sort_keys=True) + '\n')

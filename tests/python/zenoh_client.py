@@ -1,33 +1,46 @@
 #!/usr/bin/env python3
-"""Independent client of the sepmem node, written without any sepmem code.
+"""Independent ROS 2 conformance client of the sepmem node (no sepmem code).
 
-It talks to a running `sepmem node` the way an rmw_zenoh (ROS 2 Jazzy) node
-would, using only `eclipse-zenoh` and `rosbags`:
+It behaves as an rmw_zenoh (ROS 2 Jazzy) participant would, with only
+`eclipse-zenoh` and `rosbags`:
 
-* publishes `sensor_msgs/msg/PointCloud2` (serialized by rosbags) on the
-  rmw_zenoh key `<domain>/<topic>/sensor_msgs::msg::dds_::PointCloud2_/RIHS01_…`
-  with the 33-byte attachment (int64 sequence, int64 source timestamp,
-  LEB128 length 16, 16-byte GID) and declares the node (NN) and publisher (MP)
-  liveliness tokens;
-* subscribes to the node's `visualization_msgs/msg/MarkerArray` and
-  `diagnostic_msgs/msg/DiagnosticArray` outputs (type hash wildcarded) and
-  decodes them with rosbags;
-* checks what it received: TRIANGLE_LIST markers after a DELETEALL, a
-  `/diagnostics` status for its stream with η_g, frames and latency values,
-  and a valid attachment on every output sample.
+* Graph: it reads every liveliness token under `@ros2_lv/<domain>/**` with a
+  parser that follows rmw_zenoh's grammar (`liveliness_utils.cpp`): at least
+  9 parts and none empty, entity kinds NN/MP/MS/SS/SC, `%` mangling, 13 parts
+  for topic entities, and the QoS string with defaults left empty
+  (`qos.cpp`: RELIABLE, VOLATILE, KEEP_LAST 42, infinite durations).
+* Data: it subscribes on the *exact* keys an rmw_zenoh subscription would use,
+  `<domain>/<topic>/<pkg>::msg::dds_::<Name>_/<RIHS01>`, with the hashes that
+  rosbags computes from the message definitions (sepmem's .msg files and the
+  MoveIt definitions under msg/third_party are registered on the Jazzy
+  typestore), and decodes every sample with rosbags.
+* Every sample must carry rmw_zenoh's attachment: i64 sequence number
+  (1, 2, 3 … per publisher), i64 source timestamp in ns, LEB128 length 0x10
+  and the 16-byte GID.
 
-Usage (against `sepmem node --set 'node.transport.zenoh.listen=["tcp/127.0.0.1:7450"]'
---set 'node.topics=["/pyclient/**"]'`):
+Scenario (the Rust test `tests/python_client.rs` drives it):
+1. connect, and check that the node (NN) and its subscriptions (MS) of the
+   exact input topics are in the graph before any data flows;
+2. print `READY` (the test then starts `sepmem play` on --played-topic);
+3. publish a scripted stream on --scripted-topic: the same ellipsoid cloud,
+   shifted rigidly by 1 cm per frame, in lock step with the node's meshes;
+4. check the graph: node list, every endpoint's topic, type, hash and QoS
+   (mesh, markers and collision objects TRANSIENT_LOCAL);
+5. after the last frame, open a *new* session and subscribe as a
+   TRANSIENT_LOCAL rmw_zenoh subscription does (AdvancedSubscriber detecting
+   late publishers): it must get the last mesh of every stream within 1 s;
+6. wait for the streams' eviction: the collision objects of the scripted
+   stream must read ADD, MOVE …, then REMOVE, in that order;
+7. every output carries the input's frame_id and stamp.
 
-    python3 tests/python/zenoh_client.py --connect tcp/127.0.0.1:7450
-
-Prints one JSON line with the figures and exits 0 when every check passed
-(1 otherwise). Requirements: tests/python/requirements.txt.
+Prints one JSON line with the figures and `failures`; exits 0 when there are
+none. Requirements: tests/python/requirements.txt.
 """
 
 import argparse
 import json
 import os
+import pathlib
 import struct
 import sys
 import threading
@@ -35,190 +48,425 @@ import time
 
 import numpy as np
 import zenoh
-from rosbags.typesys import Stores, get_typestore
+import zenoh.ext
+from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
-PC2_HASH = "RIHS01_9198cabf7da3796ae6fe19c4cb3bdd3525492988c70522628af5daa124bae2b5"
-PC2_DDS = "sensor_msgs::msg::dds_::PointCloud2_"
-MARKERS_DDS = "visualization_msgs::msg::dds_::MarkerArray_"
-DIAG_DDS = "diagnostic_msgs::msg::dds_::DiagnosticArray_"
-SENSOR_QOS = "2::,5:,:,:,,"  # best effort, volatile, keep last 5 (rmw_zenoh encoding)
-TRIANGLE_LIST, DELETEALL = 11, 3
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+KINDS = {"NN", "MP", "MS", "SS", "SC"}
+# rmw_zenoh's QoS defaults (qos.cpp): left empty in the token.
+DEFAULT_DEPTH = 42
+ADD, REMOVE, MOVE = 0, 1, 3
+SENSOR_QOS = "2::,5:,:,:,,"
 
 
-def attachment(seq: int, gid: bytes) -> bytes:
-    """rmw_zenoh AttachmentData: i64 seq, i64 source ns, LEB128(16), 16 bytes."""
+def typestore():
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    types = {}
+    for name in ("SurfaceMesh", "FrameDiagnostics"):
+        types.update(get_types_from_msg((ROOT / "msg/msg" / f"{name}.msg").read_text(), f"sepmem_msgs/msg/{name}"))
+    for full in ("moveit_msgs/msg/CollisionObject", "object_recognition_msgs/msg/ObjectType"):
+        pkg, _, ty = full.split("/")
+        types.update(get_types_from_msg((ROOT / "msg/third_party" / pkg / "msg" / f"{ty}.msg").read_text(), full))
+    ts.register(types)
+    return ts
+
+
+def dds(type_name):
+    pkg, _, name = type_name.split("/")
+    return f"{pkg}::msg::dds_::{name}_"
+
+
+def data_key(domain, topic, type_name, ts):
+    return f"{domain}/{topic.strip('/')}/{dds(type_name)}/{ts.hash_rihs01(type_name)}"
+
+
+def parse_qos(s):
+    """rmw_zenoh keyexpr_to_qos: 6+ ':' parts with 2/2/2/3 comma sub-parts."""
+    parts = s.split(":")
+    if len(parts) < 6:
+        raise ValueError(f"QoS {s!r}: {len(parts)} parts")
+    sub = [p.split(",") for p in parts[2:6]]
+    if [len(x) for x in sub] != [2, 2, 2, 3]:
+        raise ValueError(f"QoS {s!r}: sub-parts {[len(x) for x in sub]}")
+    rel = {"": "reliable", "1": "reliable", "2": "best_effort"}[parts[0]]
+    dur = {"": "volatile", "2": "volatile", "1": "transient_local"}[parts[1]]
+    hist = {"": "keep_last", "1": "keep_last", "2": "keep_all"}[sub[0][0]]
+    depth = int(sub[0][1]) if sub[0][1] else DEFAULT_DEPTH
+    for x in sub[1:]:
+        for v in x:
+            if v and not v.isdigit():
+                raise ValueError(f"QoS {s!r}: {v!r}")
+    return {"reliability": rel, "durability": dur, "history": hist, "depth": depth}
+
+
+def parse_token(key):
+    """rmw_zenoh's Entity::make: None for a key that is not a valid token."""
+    parts = key.split("/")
+    if len(parts) < 9 or parts[0] != "@ros2_lv" or any(p == "" for p in parts):
+        raise ValueError(f"token {key!r}: {len(parts)} parts or an empty one")
+    kind = parts[5]
+    if kind not in KINDS:
+        raise ValueError(f"token {key!r}: kind {kind}")
+    tok = {
+        "domain": int(parts[1]), "zid": parts[2], "nid": int(parts[3]), "id": int(parts[4]), "kind": kind,
+        "enclave": parts[6].replace("%", "/"), "namespace": parts[7].replace("%", "/"), "node": parts[8],
+    }
+    if kind != "NN":
+        if len(parts) < 13:
+            raise ValueError(f"token {key!r}: topic entity with {len(parts)} parts")
+        tok.update(topic=parts[9].replace("%", "/"), type=parts[10], hash=parts[11], qos=parse_qos(parts[12]))
+    return tok
+
+
+def attachment(seq, gid):
     return struct.pack("<qq", seq, time.time_ns()) + bytes([16]) + gid
 
 
-def parse_attachment(b: bytes):
-    if b is None or len(b) != 33 or b[16] != 16:
-        return None
-    seq, ts = struct.unpack("<qq", b[:16])
-    return seq, ts
+class Attachments:
+    """Checks rmw_zenoh's attachment of every sample, per publisher GID."""
+
+    def __init__(self):
+        self.last = {}
+        self.first = {}
+        self.bad = []
+        self.count = 0
+
+    def check(self, key, raw, fresh):
+        self.count += 1
+        b = bytes(raw.to_bytes()) if raw is not None else b""
+        if len(b) != 33 or b[16] != 0x10:
+            self.bad.append(f"{key}: attachment {b.hex()}")
+            return
+        seq, ts_ns = struct.unpack("<qq", b[:16])
+        gid = b[17:]
+        if abs(ts_ns - time.time_ns()) > 60e9:
+            self.bad.append(f"{key}: source timestamp {ts_ns} far from now")
+        prev = self.last.get(gid)
+        if prev is None:
+            self.first[gid] = (key, seq)
+            if fresh and seq != 1:
+                self.bad.append(f"{key}: first sequence number {seq}, expected 1")
+        elif seq <= prev:
+            self.bad.append(f"{key}: sequence {seq} after {prev}")
+        self.last[gid] = seq
 
 
-def ellipsoid_cloud(ts, n: int, k: int, stamp_ns: int):
-    rng = np.random.default_rng(k)
-    d = rng.normal(size=(n, 3))
+def ellipsoid(ts, k, stamp_ns, frame_id, shift):
+    rng = np.random.default_rng(7)  # the same points every frame: a rigid motion
+    d = rng.normal(size=(2500, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    pts = (d * np.array([0.12, 0.08, 0.06]) + np.array([0.01 * k, 0.0, 1.0])).astype("<f4")
-    PointCloud2 = ts.types["sensor_msgs/msg/PointCloud2"]
-    PointField = ts.types["sensor_msgs/msg/PointField"]
-    Header = ts.types["std_msgs/msg/Header"]
-    Time = ts.types["builtin_interfaces/msg/Time"]
-    fields = [PointField(name=c, offset=4 * i, datatype=7, count=1) for i, c in enumerate("xyz")]
-    msg = PointCloud2(
-        header=Header(stamp=Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9), frame_id="camera"),
-        height=1,
-        width=n,
-        fields=fields,
-        is_bigendian=False,
-        point_step=12,
-        row_step=12 * n,
-        data=np.frombuffer(pts.tobytes(), dtype=np.uint8),
-        is_dense=True,
-    )
-    return ts.serialize_cdr(msg, "sensor_msgs/msg/PointCloud2")
+    pts = (d * np.array([0.10, 0.07, 0.05]) + np.array([shift, 0.0, 1.0])).astype("<f4")
+    T = ts.types
+    fields = [T["sensor_msgs/msg/PointField"](name=c, offset=4 * i, datatype=7, count=1) for i, c in enumerate("xyz")]
+    stamp = T["builtin_interfaces/msg/Time"](sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
+    msg = T["sensor_msgs/msg/PointCloud2"](
+        header=T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame_id), height=1, width=len(pts),
+        fields=fields, is_bigendian=False, point_step=12, row_step=12 * len(pts),
+        data=np.frombuffer(pts.tobytes(), dtype=np.uint8), is_dense=True)
+    return bytes(ts.serialize_cdr(msg, "sensor_msgs/msg/PointCloud2"))
 
 
-def main() -> int:
+def open_session(endpoint):
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("timestamping/enabled", "true")
+    return zenoh.open(conf)
+
+
+def stamp_of(header):
+    return (header.stamp.sec * 10**9 + header.stamp.nanosec, header.frame_id)
+
+
+class Outputs:
+    """The node's outputs of one input topic, on their exact keys."""
+
+    TYPES = {
+        "mesh": "sepmem_msgs/msg/SurfaceMesh",
+        "mesh_markers": "visualization_msgs/msg/MarkerArray",
+        "membrane_diagnostics": "sepmem_msgs/msg/FrameDiagnostics",
+    }
+
+    def __init__(self, args, ts, topic):
+        self.topic = topic
+        self.keys = {s: data_key(args.domain, f"{topic}/{s}", t, ts) for s, t in self.TYPES.items()}
+        self.types = {f"{topic}/{s}": t for s, t in self.TYPES.items()}
+
+
+def expected_endpoints(args, streams):
+    """(kind, topic) -> (type, durability, depth) that the sepmem node must advertise."""
+    want = {("MP", "/diagnostics"): ("diagnostic_msgs/msg/DiagnosticArray", "volatile", 10),
+            ("MP", "/collision_object"): ("moveit_msgs/msg/CollisionObject", "transient_local", 10)}
+    for o in streams:
+        want[("MS", o.topic)] = ("sensor_msgs/msg/PointCloud2", "volatile", 5)
+        for s, t in Outputs.TYPES.items():
+            dur = "volatile" if s == "membrane_diagnostics" else "transient_local"
+            want[("MP", f"{o.topic}/{s}")] = (t, dur, 10)
+    return want
+
+
+def parse_all(tokens, failures):
+    parsed = []
+    for key in sorted(tokens):
+        try:
+            parsed.append(parse_token(key))
+        except ValueError as e:
+            failures.append(str(e))
+    return parsed
+
+
+def check_graph(tokens, player_tokens, args, ts, streams, failures):
+    """The node's endpoints (all streams alive) and the player's (while it plays)."""
+    parsed = parse_all(tokens, failures)
+    nodes = sorted({t["node"] for t in parsed if t["kind"] == "NN"})
+    if args.node_name not in nodes:
+        failures.append(f"node {args.node_name} not in the node list {nodes}")
+    players = parse_all(player_tokens, failures)
+    if not any(t["kind"] == "NN" and t["node"] == args.player_name for t in players):
+        failures.append(f"node {args.player_name} not in the node list while it played")
+    ours = [t for t in parsed if t["node"] == args.node_name and t["kind"] != "NN"]
+    seen = {}
+    for t in ours:
+        seen.setdefault((t["kind"], t["topic"]), []).append(t)
+    for (kind, topic), (ty, dur, depth) in expected_endpoints(args, streams).items():
+        found = seen.get((kind, topic))
+        if not found:
+            failures.append(f"no {kind} endpoint for {topic}")
+            continue
+        for t in found:
+            if t["type"] != dds(ty) or t["hash"] != ts.hash_rihs01(ty):
+                failures.append(f"{kind} {topic}: type {t['type']} {t['hash']}, rosbags says {dds(ty)} {ts.hash_rihs01(ty)}")
+            q = t["qos"]
+            if q["durability"] != dur or q["depth"] != depth or q["history"] != "keep_last":
+                failures.append(f"{kind} {topic}: QoS {q}, expected {dur} keep_last {depth}")
+            want_rel = "best_effort" if kind == "MS" else "reliable"
+            if q["reliability"] != want_rel:
+                failures.append(f"{kind} {topic}: reliability {q['reliability']}")
+    player = [t for t in players if t["node"] == args.player_name and t["kind"] == "MP"]
+    pc2 = ts.hash_rihs01("sensor_msgs/msg/PointCloud2")
+    if not any(t["topic"] == args.played_topic and t["hash"] == pc2 for t in player):
+        failures.append(f"player has no MP token for {args.played_topic} with hash {pc2}")
+    return {"nodes": sorted(set(nodes) | {t["node"] for t in players if t["kind"] == "NN"}),
+            "endpoints": len(ours), "tokens": len(parsed)}
+
+
+def late_join(args, ts, streams):
+    """A new session subscribing like an rmw_zenoh TRANSIENT_LOCAL subscription."""
+    s2 = open_session(args.connect)
+    got = {}
+    t0 = time.monotonic()
+    subs = []
+    for o in streams:
+        def cb(sample, topic=o.topic):
+            got.setdefault(topic, time.monotonic() - t0)
+        subs.append(zenoh.ext.declare_advanced_subscriber(
+            s2, o.keys["mesh"], cb,
+            history=zenoh.ext.HistoryConfig(detect_late_publishers=True), subscriber_detection=True))
+    while time.monotonic() - t0 < 3.0 and len(got) < len(streams):
+        time.sleep(0.01)
+    for s in subs:
+        s.undeclare()
+    s2.close()
+    return got
+
+
+def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--connect", required=True, help="zenoh endpoint of the node, e.g. tcp/127.0.0.1:7450")
     ap.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "0")))
-    ap.add_argument("--topic", default="/pyclient/points")
-    ap.add_argument("--frames", type=int, default=3, help="marker arrays with triangles to wait for")
-    ap.add_argument("--points", type=int, default=3000)
-    ap.add_argument("--rate", type=float, default=5.0)
-    ap.add_argument("--timeout", type=float, default=60.0)
+    ap.add_argument("--node-name", default="sepmem")
+    ap.add_argument("--player-name", default="sepmem_player")
+    ap.add_argument("--played-topic", default="/synth/ellipsoid/points")
+    ap.add_argument("--played-frames", type=int, default=12)
+    ap.add_argument("--scripted-topic", default="/conformance/points")
+    ap.add_argument("--frames", type=int, default=4, help="frames of the scripted stream")
+    ap.add_argument("--max-triangles", type=int, default=500)
+    ap.add_argument("--timeout", type=float, default=120.0)
     args = ap.parse_args()
 
-    ts = get_typestore(Stores.ROS2_JAZZY)
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("connect/endpoints", json.dumps([args.connect]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    session = zenoh.open(conf)
+    ts = typestore()
+    session = open_session(args.connect)
     zid = str(session.info.zid())
-    topic = args.topic.strip("/")
-    mangled = "%" + topic.replace("/", "%")
-    node = "pyclient"
-    tokens = [
-        session.liveliness().declare_token(f"@ros2_lv/{args.domain}/{zid}/0/0/NN/%/%/{node}"),
-        session.liveliness().declare_token(
-            f"@ros2_lv/{args.domain}/{zid}/0/1/MP/%/%/{node}/{mangled}/"
-            f"sensor_msgs::msg::dds_::PointCloud2_/{PC2_HASH}/{SENSOR_QOS}"
-        ),
-    ]
-    gid = bytes(range(16))
-
     lock = threading.Lock()
-    got = {"markers": [], "diagnostics": [], "bad_attachments": 0, "errors": []}
+    tokens = set()
+    failures = []
+    att = Attachments()
+    t_start = time.monotonic()
 
-    def on_markers(sample):
-        try:
-            att = parse_attachment(bytes(sample.attachment.to_bytes()) if sample.attachment else None)
-            msg = ts.deserialize_cdr(bytes(sample.payload.to_bytes()), "visualization_msgs/msg/MarkerArray")
-            with lock:
-                if att is None:
-                    got["bad_attachments"] += 1
-                got["markers"].append(msg)
-        except Exception as e:  # noqa: BLE001 - report any decode failure
-            with lock:
-                got["errors"].append(f"markers: {e}")
-
-    def on_diag(sample):
-        try:
-            att = parse_attachment(bytes(sample.attachment.to_bytes()) if sample.attachment else None)
-            msg = ts.deserialize_cdr(bytes(sample.payload.to_bytes()), "diagnostic_msgs/msg/DiagnosticArray")
-            with lock:
-                if att is None:
-                    got["bad_attachments"] += 1
-                got["diagnostics"].append(msg)
-        except Exception as e:  # noqa: BLE001
-            with lock:
-                got["errors"].append(f"diagnostics: {e}")
-
-    subs = [
-        session.declare_subscriber(f"{args.domain}/{topic}/mesh_markers/{MARKERS_DDS}/*", on_markers),
-        session.declare_subscriber(f"{args.domain}/diagnostics/{DIAG_DDS}/*", on_diag),
-    ]
-    pub = session.declare_publisher(f"{args.domain}/{topic}/{PC2_DDS}/{PC2_HASH}")
-    t0 = time.time()
-    seq = 0
-
-    def done():
+    def on_token(sample):
         with lock:
-            tri = [m for m in got["markers"] if any(x.type == TRIANGLE_LIST for x in m.markers)]
-            diag = [
-                s
-                for d in got["diagnostics"]
-                for s in d.status
-                if args.topic in s.name and any(kv.key == "eta_g" for kv in s.values)
-            ]
-        return len(tri) >= args.frames and diag
+            if sample.kind == zenoh.SampleKind.PUT:
+                tokens.add(str(sample.key_expr))
+            else:
+                tokens.discard(str(sample.key_expr))
 
-    while time.time() - t0 < args.timeout and not done():
-        seq += 1
-        payload = ellipsoid_cloud(ts, args.points, seq, time.time_ns())
-        pub.put(bytes(payload), attachment=attachment(seq, gid))
-        time.sleep(1.0 / args.rate)
-    # One more diagnostics period, so that the last frames are counted.
-    time.sleep(1.2)
+    lv_sub = session.liveliness().declare_subscriber(f"@ros2_lv/{args.domain}/**", on_token, history=True)
 
-    with lock:
-        markers = list(got["markers"])
-        diags = list(got["diagnostics"])
-        bad = got["bad_attachments"]
-        errors = list(got["errors"])
-    failures = list(errors)
-    tri_arrays = [m for m in markers if any(x.type == TRIANGLE_LIST for x in m.markers)]
-    if len(tri_arrays) < args.frames:
-        failures.append(f"only {len(tri_arrays)} marker arrays with triangles")
-    triangles = 0
-    for m in tri_arrays:
-        if m.markers[0].action != DELETEALL:
-            failures.append("marker array does not start with DELETEALL")
-        for x in m.markers[1:]:
-            if x.type != TRIANGLE_LIST or len(x.points) == 0 or len(x.points) % 3:
-                failures.append(f"bad marker type {x.type} with {len(x.points)} points")
-            triangles += len(x.points) // 3
-    status = None
-    for d in diags:
-        for s in d.status:
-            if args.topic in s.name and any(kv.key == "eta_g" for kv in s.values):
-                status = s
-    values = {}
-    if status is None:
-        failures.append(f"no /diagnostics status for {args.topic}")
+    def has_token(pred):
+        with lock:
+            keys = list(tokens)
+        for k in keys:
+            try:
+                t = parse_token(k)
+            except ValueError:
+                continue
+            if pred(t):
+                return True
+        return False
+
+    # 1. The node and its exact subscriptions are visible before any data.
+    exact = [args.scripted_topic, args.played_topic]
+    while time.monotonic() - t_start < 30 and not all(
+            has_token(lambda t, x=x: t["node"] == args.node_name and t["kind"] == "MS" and t["topic"] == x)
+            for x in exact):
+        time.sleep(0.05)
+    early = {x: has_token(lambda t, x=x: t["node"] == args.node_name and t["kind"] == "MS" and t["topic"] == x
+                          and t.get("qos", {}).get("reliability") == "best_effort") for x in exact}
+    for x, ok in early.items():
+        if not ok:
+            failures.append(f"no MS token (best effort) for {x} before any data")
+
+    streams = [Outputs(args, ts, args.scripted_topic), Outputs(args, ts, args.played_topic)]
+    inputs = {args.scripted_topic: set(), args.played_topic: set()}
+    received = {}  # output topic -> list of decoded messages
+    collision = []
+
+    def subscriber(key, type_name, topic, sink):
+        def cb(sample):
+            try:
+                msg = ts.deserialize_cdr(bytes(sample.payload.to_bytes()), type_name)
+                with lock:
+                    att.check(topic, sample.attachment, fresh=topic != "/diagnostics")
+                    sink(msg)
+            except Exception as e:  # noqa: BLE001 - any decode failure is a finding
+                with lock:
+                    failures.append(f"{topic}: {e}")
+        return session.declare_subscriber(key, cb)
+
+    subs = []
+    for o in streams:
+        for suffix, key in o.keys.items():
+            topic = f"{o.topic}/{suffix}"
+            subs.append(subscriber(key, Outputs.TYPES[suffix], topic,
+                                   lambda m, topic=topic: received.setdefault(topic, []).append(m)))
+    subs.append(subscriber(data_key(args.domain, "/collision_object", "moveit_msgs/msg/CollisionObject", ts),
+                           "moveit_msgs/msg/CollisionObject", "/collision_object", collision.append))
+    subs.append(subscriber(data_key(args.domain, "/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", ts),
+                           "diagnostic_msgs/msg/DiagnosticArray", "/diagnostics",
+                           lambda m: received.setdefault("/diagnostics", []).append(m)))
+    # The player's clouds, on the key an rmw_zenoh subscription uses (checks `sepmem play`).
+    subs.append(subscriber(data_key(args.domain, args.played_topic, "sensor_msgs/msg/PointCloud2", ts),
+                           "sensor_msgs/msg/PointCloud2", args.played_topic,
+                           lambda m: inputs[args.played_topic].add(stamp_of(m.header))))
+
+    # Our own publisher, as an rmw_zenoh node: NN + MP tokens, attachments.
+    name = "conformance_client"
+    mangled = "%" + args.scripted_topic.strip("/").replace("/", "%")
+    pc2 = "sensor_msgs/msg/PointCloud2"
+    own = [session.liveliness().declare_token(f"@ros2_lv/{args.domain}/{zid}/0/0/NN/%/%/{name}"),
+           session.liveliness().declare_token(
+               f"@ros2_lv/{args.domain}/{zid}/0/1/MP/%/%/{name}/{mangled}/{dds(pc2)}/{ts.hash_rihs01(pc2)}/{SENSOR_QOS}")]
+    pub = session.declare_publisher(data_key(args.domain, args.scripted_topic, pc2, ts))
+    print("READY", flush=True)
+
+    # 3. The scripted stream, in lock step with the node's meshes.
+    mesh_topic = f"{args.scripted_topic}/mesh"
+    gid = bytes(range(16))
+    for k in range(args.frames):
+        stamp = time.time_ns()
+        inputs[args.scripted_topic].add((stamp, "conformance_cam"))
+        with lock:
+            before = len(received.get(mesh_topic, []))
+        pub.put(ellipsoid(ts, k, stamp, "conformance_cam", 0.01 * k), attachment=attachment(k + 1, gid))
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 60:
+            with lock:
+                if len(received.get(mesh_topic, [])) > before:
+                    break
+            time.sleep(0.02)
+        else:
+            failures.append(f"no mesh for scripted frame {k}")
+    # Wait for the played stream's meshes (the test plays the bag meanwhile).
+    played_mesh = f"{args.played_topic}/mesh"
+    player_snapshot = None
+    while time.monotonic() - t_start < args.timeout:
+        with lock:
+            n_in = len(inputs[args.played_topic])
+            if n_in and player_snapshot is None:
+                player_snapshot = set(tokens)
+            n_out = len(received.get(played_mesh, []))
+            last = max((stamp_of(m.header) for m in received.get(played_mesh, [])), default=None)
+        if n_in >= args.played_frames and n_out > 0 and last == max(inputs[args.played_topic]):
+            break
+        time.sleep(0.05)
     else:
-        values = {kv.key: kv.value for kv in status.values}
-        for key in ("eta_g", "iterations", "frames", "drops", "p50_ms", "p95_ms", "warm", "cold"):
-            if key not in values:
-                failures.append(f"status lacks {key}")
-        if status.level not in (0, 1):
-            failures.append(f"status level {status.level} ({status.message})")
-        if not 0.0 < float(values.get("eta_g", "0")) <= 1.0:
-            failures.append(f"eta_g {values.get('eta_g')}")
-    if bad:
-        failures.append(f"{bad} output samples without a valid rmw_zenoh attachment")
-    print(
-        json.dumps(
-            {
-                "published": seq,
-                "marker_arrays": len(markers),
-                "marker_arrays_with_triangles": len(tri_arrays),
-                "triangles": triangles,
-                "diagnostic_arrays": len(diags),
-                "status": {"name": status.name, "level": int(status.level), "values": values} if status else None,
-                "failures": failures,
-            }
-        )
-    )
+        failures.append(f"played stream: {n_in} clouds seen, {n_out} meshes")
+
+    # 4. The graph while every stream is alive.
+    with lock:
+        snapshot = set(tokens)
+    graph = check_graph(snapshot, player_snapshot or set(), args, ts, streams, failures)
+
+    # 5. A late joiner gets the last mesh of every stream within 1 s.
+    late = late_join(args, ts, streams)
+    for o in streams:
+        if late.get(o.topic) is None or late[o.topic] > 1.0:
+            failures.append(f"late joiner: last mesh of {o.topic} after {late.get(o.topic)} s")
+
+    # 6. Eviction: REMOVE of the scripted stream's collision object.
+    sid = None
+    while time.monotonic() - t_start < args.timeout:
+        with lock:
+            ops = [(c.id, c.operation) for c in collision]
+        if any(op == REMOVE and i.endswith(args.scripted_topic) for i, op in ops):
+            break
+        time.sleep(0.1)
+    with lock:
+        objs = list(collision)
+        outs = {k: list(v) for k, v in received.items()}
+    sequence = [c.operation for c in objs if c.id.endswith(args.scripted_topic)]
+    if objs:
+        sid = next((c.id for c in objs if c.id.endswith(args.scripted_topic)), None)
+    first_move = sequence.index(MOVE) if MOVE in sequence else -1
+    if not (sequence and sequence[0] == ADD and first_move > 0 and sequence[-1] == REMOVE
+            and REMOVE not in sequence[:-1]):
+        failures.append(f"collision object {sid}: operations {sequence}, expected ADD, MOVE …, REMOVE")
+    for c in objs:
+        if c.operation == ADD and (len(c.meshes) != 1 or not 0 < len(c.meshes[0].triangles) <= args.max_triangles):
+            failures.append(f"ADD {c.id}: {[len(m.triangles) for m in c.meshes]} triangles")
+        if c.operation in (MOVE, REMOVE) and (c.meshes or c.primitives or c.planes):
+            failures.append(f"{c.id}: operation {c.operation} with geometry")
+
+    # 7. Frames and stamps: every output carries its input's header.
+    headers = 0
+    for o in streams:
+        sent = inputs[o.topic]
+        for suffix in Outputs.TYPES:
+            for m in outs.get(f"{o.topic}/{suffix}", []):
+                hs = [x.header for x in m.markers] if suffix == "mesh_markers" else [m.header]
+                for h in hs:
+                    headers += 1
+                    if stamp_of(h) not in sent:
+                        failures.append(f"{o.topic}/{suffix}: header {stamp_of(h)} is no input's")
+    for c in objs:
+        headers += 1
+        if c.operation != REMOVE and stamp_of(c.header) not in inputs[args.scripted_topic] | inputs[args.played_topic]:
+            failures.append(f"collision object {c.id}: header {stamp_of(c.header)} is no input's")
+    with lock:
+        failures.extend(att.bad)
+        samples = att.count
+
+    print(json.dumps({
+        "graph": graph, "early_subscriptions": early, "samples_checked": samples, "headers_checked": headers,
+        "outputs": {k: len(v) for k, v in outs.items()}, "collision_operations": sequence,
+        "collision_objects": len(objs), "late_join_s": late, "failures": failures}))
     for s in subs:
         s.undeclare()
-    for t in tokens:
+    for t in own:
         t.undeclare()
     pub.undeclare()
+    lv_sub.undeclare()
     session.close()
     return 0 if not failures else 1
 
