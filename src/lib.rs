@@ -27,6 +27,7 @@
 //! | [`spline`] | the closed cubic B-spline surface (Eq. 10), its least-squares fit and growth |
 //! | [`bag`] | rosbag2 bags: MCAP and sqlite3 reading, MCAP writing with ROS 2 schemas |
 //! | [`wire`] | ROS 2 messages, CDR codec, RIHS01 type hashes, PointCloud2 ↔ points |
+//! | [`viz`] | pictures: mesh snapshots from three viewpoints, line and bar plots (PNG, embedded font) |
 //! | [`pipeline`] | the frame pipeline: per-stream trackers, warm start with motion compensation, outputs, replay engine |
 //!
 //! Every module's own documentation cites the paper's equations it implements.
@@ -50,6 +51,7 @@ pub mod shapes;
 pub mod spline;
 pub mod synth;
 pub mod transport;
+pub mod viz;
 pub mod wire;
 
 pub use cloud::{Aabb, Attribute, PointCloud, Vec3};

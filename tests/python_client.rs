@@ -6,6 +6,8 @@
 //! `rosbags` and `numpy` is not available.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -19,9 +21,10 @@ fn python_zenoh() -> bool {
 #[test]
 fn python_zenoh_client_round_trips_through_the_node() {
     if !python_zenoh() {
-        eprintln!(
-            "SKIPPED python_zenoh_client_round_trips_through_the_node: python3 with eclipse-zenoh, \
-             rosbags and numpy not found (pip install -r tests/python/requirements.txt)"
+        common::skipped(
+            "python_zenoh_client_round_trips_through_the_node",
+            "python3 with eclipse-zenoh, rosbags and numpy not found \
+             (pip install -r tests/python/requirements.txt)",
         );
         return;
     }

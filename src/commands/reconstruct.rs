@@ -14,6 +14,7 @@ pub fn run(
     config: Option<&Path>,
     set: &[String],
     report: Option<&Path>,
+    snapshot: Option<&Path>,
 ) -> Result<()> {
     let cfg = Config::load(config, set).context("loading configuration")?;
     let loaded = sepmem::io::load_cloud(input)
@@ -33,6 +34,21 @@ pub fn run(
     if let Some(path) = report {
         let text = serde_json::to_string_pretty(r)?;
         std::fs::write(path, text).with_context(|| format!("writing report {}", path.display()))?;
+    }
+    if let Some(png) = snapshot {
+        let caption = format!(
+            "{}: {} points, {} iterations",
+            input.display(),
+            r.points_used,
+            r.iterations
+        );
+        super::pictures::reconstruct_snapshot(
+            png,
+            &rec.mesh,
+            &loaded.cloud.points,
+            r.viewpoint,
+            &caption,
+        )?;
     }
     let t = &r.times;
     println!(
