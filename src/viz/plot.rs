@@ -33,6 +33,8 @@ pub struct Panel {
     pub y_range: Option<(f64, f64)>,
     /// The lines.
     pub series: Vec<Series>,
+    /// Legend in the upper right corner (default: lower right).
+    pub legend_top: bool,
 }
 
 /// Grouped bars: one group per category, one bar per series in each.
@@ -160,7 +162,11 @@ fn draw_panel<DB: DrawingBackend>(
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
         .label_font((FAMILY, 14))
-        .position(SeriesLabelPosition::LowerRight)
+        .position(if panel.legend_top {
+            SeriesLabelPosition::UpperRight
+        } else {
+            SeriesLabelPosition::LowerRight
+        })
         .draw()
         .map_err(draw_err(what))?;
     Ok(())
