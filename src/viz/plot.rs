@@ -204,7 +204,8 @@ pub fn write_bars(bars: &Bars, path: &Path) -> Result<(), VizError> {
             .x_label_area_size(36)
             .y_label_area_size(60)
             .build_cartesian_2d(
-                (0..n).into_segmented(),
+                // Values 0..=n-1: one segment per group, none left empty.
+                (0..n - 1).into_segmented(),
                 0.0..(top.max(0.0) * 1.15).max(1e-9),
             )
             .map_err(draw_err(what))?;
