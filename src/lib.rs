@@ -31,6 +31,7 @@
 //! | [`wire`] | ROS 2 messages, CDR codec, RIHS01 type hashes, PointCloud2 ↔ points |
 //! | [`stream`] | the identity of an object stream (topic and segment label) |
 //! | [`eval`] | scoring replays against ground truth: per-frame scores, cold references, scored replay |
+//! | [`viz`] | pictures: mesh snapshots from three viewpoints, line and bar plots (PNG, embedded font) |
 //! | [`pipeline`] | the frame pipeline: per-stream trackers, warm start with motion compensation, outputs, replay engine |
 //!
 //! Every module's own documentation cites the paper's equations it implements.
@@ -58,6 +59,7 @@ pub mod spline;
 pub mod stream;
 pub mod synth;
 pub mod transport;
+pub mod viz;
 pub mod wire;
 
 pub use cloud::{Aabb, Attribute, PointCloud, Vec3};

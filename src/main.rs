@@ -1,10 +1,19 @@
 //! The `sepmem` command-line tool. Errors are reported here with `anyhow`;
 //! the library uses typed errors.
+//!
+//! A failing command prints one line, `error: ` and the error's chain of
+//! causes, and exits with status 1. It never prints a backtrace: the chain
+//! is formatted here (`{:#}`), not by anyhow's `Debug`, which appends a
+//! stack backtrace whenever `RUST_BACKTRACE` is set. Logs go to stderr,
+//! filtered by `--log` / `$SEPMEM_LOG`, else `$RUST_LOG`, else `warn`, with
+//! colour only when stderr is a terminal (and `$NO_COLOR` is unset).
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
+use std::io::IsTerminal;
 use std::path::PathBuf;
+use std::process::ExitCode;
 
 mod commands;
 
@@ -12,9 +21,10 @@ mod commands;
 #[derive(Parser, Debug)]
 #[command(name = "sepmem", version, about, long_about = None)]
 struct Cli {
-    /// Log filter (tracing env-filter syntax), e.g. `info` or `sepmem=debug`.
-    #[arg(long, global = true, env = "SEPMEM_LOG", default_value = "warn")]
-    log: String,
+    /// Log filter (tracing env-filter syntax), e.g. `info` or `sepmem=debug`
+    /// [default: $RUST_LOG, else warn].
+    #[arg(long, global = true, env = "SEPMEM_LOG")]
+    log: Option<String>,
     #[command(subcommand)]
     command: Command,
 }
@@ -51,6 +61,10 @@ enum Command {
         /// per-phase times, viewpoint, point counts) as JSON to this file.
         #[arg(long)]
         report: Option<PathBuf>,
+        /// Also write a PNG of the mesh with its input points from the
+        /// camera side, the side and the back.
+        #[arg(long, value_name = "FILE.png")]
+        snapshot: Option<PathBuf>,
     },
     /// The 3D separability filter (paper Fig. 6): write the cloud as a PLY
     /// coloured by the separability of the two halves of a cuboid at each point.
@@ -149,6 +163,11 @@ enum Command {
         /// another seed re-runs the same benchmark on fresh samplings.
         #[arg(long, default_value_t = sepmem::bench::DEFAULT_SEED)]
         seed: u64,
+        /// Peers' F-scores per input condition, JSON
+        /// `{"method": {"condition": F}}`, drawn beside sepmem's in
+        /// `conditions.png` (e.g. the paper's Table 1: tests/data/peers_paper_table1.json).
+        #[arg(long, value_name = "FILE.json")]
+        peers: Option<PathBuf>,
     },
     /// Run the live node: subscribe to PointCloud2 topics over zenoh
     /// (rmw_zenoh keys by default), publish meshes, markers and diagnostics,
@@ -206,7 +225,7 @@ fn end_quietly_on_broken_pipe() {
 #[cfg(not(unix))]
 fn end_quietly_on_broken_pipe() {}
 
-fn main() -> Result<()> {
+fn main() -> ExitCode {
     let cli = Cli::parse();
     if !matches!(
         cli.command,
@@ -214,11 +233,43 @@ fn main() -> Result<()> {
     ) {
         end_quietly_on_broken_pipe();
     }
+    match init_logging(cli.log.as_deref()).and_then(|()| run(cli.command)) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // `{:#}`: the chain of causes on one line, without the backtrace
+            // that anyhow's Debug output adds when RUST_BACKTRACE is set.
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Install the stderr logger: the filter from `--log` / `$SEPMEM_LOG`, else
+/// `$RUST_LOG`, else `warn`; ANSI colour only on a terminal.
+fn init_logging(flag: Option<&str>) -> Result<()> {
+    let from_env = std::env::var("RUST_LOG")
+        .ok()
+        .filter(|v| !v.trim().is_empty());
+    let (spec, source) = match (flag, &from_env) {
+        (Some(f), _) => (f, "--log / SEPMEM_LOG"),
+        (None, Some(e)) => (e.as_str(), "RUST_LOG"),
+        (None, None) => ("warn", "the default"),
+    };
+    let filter = tracing_subscriber::EnvFilter::try_new(spec)
+        .with_context(|| format!("invalid log filter {spec:?} (from {source})"))?;
+    let colour = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();
     tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::new(&cli.log))
+        .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(colour)
         .init();
-    match cli.command {
+    tracing::debug!(filter = spec, source, colour, "logging to stderr");
+    Ok(())
+}
+
+/// Run one subcommand.
+fn run(command: Command) -> Result<()> {
+    match command {
         Command::Config {
             config,
             set,
@@ -230,9 +281,15 @@ fn main() -> Result<()> {
             config,
             set,
             report,
-        } => {
-            commands::reconstruct::run(&input, &output, config.as_deref(), &set, report.as_deref())
-        }
+            snapshot,
+        } => commands::reconstruct::run(
+            &input,
+            &output,
+            config.as_deref(),
+            &set,
+            report.as_deref(),
+            snapshot.as_deref(),
+        ),
         Command::Filter {
             input,
             output,
@@ -267,9 +324,18 @@ fn main() -> Result<()> {
             config,
             set,
             seed,
+            peers,
         } => {
             let cfg = sepmem::config::Config::load(config.as_deref(), &set)?;
-            commands::bench::run(quick, &out, &only, datasets, cfg.membrane, seed)
+            commands::bench::run(
+                quick,
+                &out,
+                &only,
+                datasets,
+                cfg.membrane,
+                seed,
+                peers.as_deref(),
+            )
         }
         Command::BenchNode(args) => commands::bench_node::run(&args),
         Command::Node { config, set } => commands::node::run_node(config.as_deref(), &set),

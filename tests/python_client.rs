@@ -10,6 +10,8 @@
 //! python3 with `zenoh`, `rosbags` and `numpy` is not available.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::io::{BufRead, BufReader, Read};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -78,9 +80,10 @@ fn stop(mut node: Child) -> (bool, String) {
 #[test]
 fn conformance_client_passes_against_node_and_player() {
     if !python_zenoh() {
-        eprintln!(
-            "SKIPPED conformance_client_passes_against_node_and_player: python3 with eclipse-zenoh, \
-             rosbags and numpy not found (pip install -r tests/python/requirements.txt)"
+        common::skipped(
+            "conformance_client_passes_against_node_and_player",
+            "python3 with eclipse-zenoh, rosbags and numpy not found \
+             (pip install -r tests/python/requirements.txt)",
         );
         return;
     }

@@ -15,7 +15,9 @@ pub fn run(
     datasets: Option<PathBuf>,
     membrane: MembraneConfig,
     seed: u64,
+    peers: Option<&Path>,
 ) -> Result<()> {
+    let peers = peers.map(super::pictures::load_peers).transpose()?;
     let datasets = datasets.or_else(default_datasets);
     match &datasets {
         Some(d) if d.is_dir() => eprintln!("bench: datasets at {}", d.display()),
@@ -44,6 +46,7 @@ pub fn run(
     std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
     let json = serde_json::to_string_pretty(&report).context("serialising the report")?;
     std::fs::write(&json_path, json).with_context(|| format!("writing {}", json_path.display()))?;
+    let plots = super::pictures::bench_plots(&report, peers.as_ref(), out)?;
     for s in &report.skipped {
         eprintln!("SKIPPED {}: {}", s.what, s.reason);
     }
@@ -53,6 +56,9 @@ pub fn run(
         md_path.display(),
         json_path.display()
     );
+    for p in &plots {
+        eprintln!("bench: wrote {}", p.display());
+    }
     Ok(())
 }
 

@@ -7,6 +7,7 @@ pub mod demo;
 pub mod eval;
 pub mod filter;
 pub mod node;
+pub mod pictures;
 pub mod reconstruct;
 pub mod replay;
 pub mod soak;

@@ -14,6 +14,7 @@ pub fn run(
     config: Option<&Path>,
     set: &[String],
     report: Option<&Path>,
+    snapshot: Option<&Path>,
 ) -> Result<()> {
     let cfg = Config::load(config, set).context("loading configuration")?;
     sepmem::io::check_output(output, sepmem::io::OutputKind::Mesh)
@@ -35,6 +36,21 @@ pub fn run(
     if let Some(path) = report {
         let text = serde_json::to_string_pretty(r)?;
         std::fs::write(path, text).with_context(|| format!("writing report {}", path.display()))?;
+    }
+    if let Some(png) = snapshot {
+        let caption = format!(
+            "{}: {} points, {} iterations",
+            input.display(),
+            r.points_used,
+            r.iterations
+        );
+        super::pictures::reconstruct_snapshot(
+            png,
+            &rec.mesh,
+            &loaded.cloud.points,
+            r.viewpoint,
+            &caption,
+        )?;
     }
     let t = &r.times;
     println!(

@@ -25,6 +25,7 @@
 //! on a single view a cold start's F-score moves by about ±0.02 with which
 //! points were kept, so this is the resolution of the reference itself.
 
+use super::pictures::{FrameView, ReplayPictures};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -81,6 +82,15 @@ pub struct ReplayArgs {
     /// Print only the summary.
     #[arg(short, long)]
     pub quiet: bool,
+    /// Write one PNG per stream and frame into this folder: the mesh with
+    /// its input points (and the ground truth, when the bag has it) from
+    /// the camera side, the side and the back.
+    #[arg(long, value_name = "DIR")]
+    pub snapshots: Option<PathBuf>,
+    /// Write a PNG plot of F, visible recall R_vis (when scored) and
+    /// latency over the frames of each stream.
+    #[arg(long, value_name = "FILE.png")]
+    pub plot: Option<PathBuf>,
 }
 
 /// Run `sepmem replay` from its arguments.
@@ -95,6 +105,8 @@ pub fn run_args(a: &ReplayArgs) -> Result<()> {
         Outputs {
             bag: a.out.as_deref(),
             meshes: None,
+            snapshots: a.snapshots.as_deref(),
+            plot: a.plot.as_deref(),
         },
         &a.topic,
         &cfg,
@@ -151,6 +163,10 @@ pub struct Outputs<'a> {
     pub bag: Option<&'a Path>,
     /// Folder receiving one binary PLY mesh per stream and frame.
     pub meshes: Option<&'a Path>,
+    /// Folder receiving one PNG snapshot per stream and frame.
+    pub snapshots: Option<&'a Path>,
+    /// PNG plot of F, R_vis and latency over the frames.
+    pub plot: Option<&'a Path>,
 }
 
 /// Replay `bag` into the given outputs with the given options.
@@ -167,6 +183,7 @@ pub fn run_opts(
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let bag = Bag::open(bag_path).with_context(|| format!("opening bag {}", bag_path.display()))?;
+    let mut pictures = ReplayPictures::new(outputs_to.snapshots, outputs_to.plot)?;
     let cloud_topics: Vec<&str> = bag
         .topics
         .iter()
@@ -337,6 +354,16 @@ pub fn run_opts(
                         }
                     }
                     print(line);
+                    pictures.frame(&FrameView {
+                        stream: &id,
+                        frame: r.frame,
+                        mesh: &r.reconstruction.mesh,
+                        points: &sc.cloud.points,
+                        truth: gt.as_ref(),
+                        viewpoint: r.reconstruction.report.viewpoint,
+                        score: score.map(|s| (s.fscore, s.recall_visible)),
+                        latency_ms: r.latency_ms,
+                    })?;
                     if let Some(dir) = outputs_to.meshes {
                         let name = format!(
                             "{}_{:04}.ply",
@@ -443,6 +470,7 @@ pub fn run_opts(
             println!("{summary}");
         }
     }
+    pictures.finish()?;
     if let Some(w) = writer {
         let s = w.finish()?;
         println!(

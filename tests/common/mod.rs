@@ -4,6 +4,33 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+/// Say that `test` was skipped and why: a `SKIPPED(<test>): <reason>` line
+/// on stderr (shown with `--nocapture`), and the same line appended to the
+/// skip log that `.ci/run` summarises at the end of the CI log:
+/// `$SEPMEM_SKIP_LOG`, else `skipped.log` in cargo's target tmp dir.
+pub fn skipped(test: &str, reason: &str) {
+    let log = std::env::var_os("SEPMEM_SKIP_LOG")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("skipped.log"));
+    skipped_to(&log, test, reason);
+}
+
+/// [`skipped`] into the log file `log`.
+pub fn skipped_to(log: &Path, test: &str, reason: &str) {
+    use std::io::Write;
+    let line = format!("SKIPPED({test}): {reason}");
+    eprintln!("{line}");
+    // One write per line in append mode: parallel tests do not interleave.
+    let appended = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(log)
+        .and_then(|mut f| f.write_all(format!("{line}\n").as_bytes()));
+    if let Err(e) = appended {
+        eprintln!("(could not append to the skip log {}: {e})", log.display());
+    }
+}
+
 /// The repository's committed test data (`tests/data`).
 pub fn data_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data")
@@ -19,9 +46,12 @@ pub fn shared_datasets(test: &str) -> Option<PathBuf> {
     if dir.is_dir() {
         Some(dir)
     } else {
-        eprintln!(
-            "SKIPPED {test}: shared datasets not found at {} (set SEPMEM_DATASETS)",
-            dir.display()
+        skipped(
+            test,
+            &format!(
+                "shared datasets not found at {} (set SEPMEM_DATASETS)",
+                dir.display()
+            ),
         );
         None
     }
@@ -40,9 +70,10 @@ pub fn python_tools() -> bool {
 /// SKIPPED line naming `test` when the Python tools are missing.
 pub fn external_bag_check(bag: &Path, args: &[String], test: &str) -> Option<String> {
     if !python_tools() {
-        eprintln!(
-            "SKIPPED {test} (external check): python3 with rosbags/mcap/mcap-ros2-support \
-             not available (pip install -r tests/python/requirements.txt)"
+        skipped(
+            &format!("{test} (external check)"),
+            "python3 with rosbags/mcap/mcap-ros2-support not available \
+             (pip install -r tests/python/requirements.txt)",
         );
         return None;
     }
