@@ -141,7 +141,10 @@ fn points_lie_on_the_true_posed_mesh_within_the_axial_noise() {
     let mean = all.iter().sum::<f64>() / n;
     let sd = (all.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
     let worst = all.iter().fold(0.0f64, |m, r| m.max(r.abs()));
-    eprintln!("{} residuals: mean {mean:.3} σ, sd {sd:.3} σ, worst {worst:.2} σ", all.len());
+    eprintln!(
+        "{} residuals: mean {mean:.3} σ, sd {sd:.3} σ, worst {worst:.2} σ",
+        all.len()
+    );
     assert!(mean.abs() < 0.1, "bias {mean} σ");
     assert!((sd - 1.0).abs() < 0.08, "spread {sd} σ");
     assert!(worst < 5.5, "a point {worst} σ off its surface");
@@ -178,21 +181,29 @@ fn no_point_lies_behind_another_object_along_its_ray() {
                 .map(|(p, _)| *p)
                 .collect();
             seen[o][k] = own.len();
-            assert_eq!(own.len(), w.truth.frame(id, *stamp).unwrap().visible_points as usize);
+            assert_eq!(
+                own.len(),
+                w.truth.frame(id, *stamp).unwrap().visible_points as usize
+            );
             // On its own surface ...
             assert!(residuals(&own, &meshes[o], 3).iter().all(|r| r.abs() < 5.5));
             // ... and never behind the other object along its ray.
             let other = &meshes[1 - o];
             for p in own.iter().step_by(2) {
                 if let Some(z) = brute_first_hit(other, &Vec3::zeros(), &(p / p.z)) {
-                    assert!(z > p.z - 5.0 * kinect_sigma(z), "frame {k} {id}: {p:?} behind {z}");
+                    assert!(
+                        z > p.z - 5.0 * kinect_sigma(z),
+                        "frame {k} {id}: {p:?} behind {z}"
+                    );
                 }
             }
         }
     }
     eprintln!("visible points per frame: {seen:?}");
     // At 90° (frame 2) one object is (mostly) hidden behind the other.
-    let hidden = (0..2).map(|o| seen[o][2] as f64 / seen[o][0] as f64).fold(1.0, f64::min);
+    let hidden = (0..2)
+        .map(|o| seen[o][2] as f64 / seen[o][0] as f64)
+        .fold(1.0, f64::min);
     assert!(hidden < 0.3, "no occlusion at the quarter turn: {seen:?}");
 }
 
@@ -270,16 +281,29 @@ fn motions_move_what_the_ground_truth_says() {
         (stamps[0], stamps[stamps.len() - 1])
     };
     // Turning: 180° in place, camera still.
-    let s = spec(&["bottle"], frames, SceneMotion::Turn { degrees: 180.0 }, Layout::SeparateTopics);
+    let s = spec(
+        &["bottle"],
+        frames,
+        SceneMotion::Turn { degrees: 180.0 },
+        Layout::SeparateTopics,
+    );
     let w = write_and_read(&s, &tmp.path().join("turn.mcap"));
     let id = "/synth/bottle/points";
     let (a, b) = first_last(&w.truth, id);
     let (p0, p1) = (world(id, a, &w.truth), world(id, b, &w.truth));
     assert!((p0.rotation.angle_to(&p1.rotation) - std::f64::consts::PI).abs() < 1e-9);
     assert!((p0.translation.vector - p1.translation.vector).norm() < 1e-12);
-    assert_eq!(w.truth.frame(id, b).unwrap().camera_pose, Isometry3::identity());
+    assert_eq!(
+        w.truth.frame(id, b).unwrap().camera_pose,
+        Isometry3::identity()
+    );
     // Orbit: the object stays put in the world; the camera goes half way round it.
-    let s = spec(&["bottle"], frames, SceneMotion::Orbit { degrees: 180.0 }, Layout::SeparateTopics);
+    let s = spec(
+        &["bottle"],
+        frames,
+        SceneMotion::Orbit { degrees: 180.0 },
+        Layout::SeparateTopics,
+    );
     let w = write_and_read(&s, &tmp.path().join("orbit.mcap"));
     let (a, b) = first_last(&w.truth, id);
     let (p0, p1) = (world(id, a, &w.truth), world(id, b, &w.truth));
@@ -292,7 +316,12 @@ fn motions_move_what_the_ground_truth_says() {
     let seen = w.truth.frame(id, b).unwrap().pose;
     assert!((seen.translation.vector - Vec3::new(0.0, 0.0, 0.8)).norm() < 1e-9);
     // Pick and place: rests, rises by ¾ of its size, set down half its size away.
-    let s = spec(&["bottle"], 11, SceneMotion::PickPlace, Layout::SeparateTopics);
+    let s = spec(
+        &["bottle"],
+        11,
+        SceneMotion::PickPlace,
+        Layout::SeparateTopics,
+    );
     let w = write_and_read(&s, &tmp.path().join("pick.mcap"));
     let track = &w.truth.streams[id];
     let heights: Vec<f64> = track
@@ -304,26 +333,41 @@ fn motions_move_what_the_ground_truth_says() {
     assert!((top - 0.15).abs() < 1e-9, "{heights:?}");
     assert!(heights[0].abs() < 1e-12 && heights[10].abs() < 1e-12);
     let (a, b) = first_last(&w.truth, id);
-    let moved = world(id, b, &w.truth).translation.vector - world(id, a, &w.truth).translation.vector;
+    let moved =
+        world(id, b, &w.truth).translation.vector - world(id, a, &w.truth).translation.vector;
     assert!((moved - Vec3::new(0.1, 0.0, 0.0)).norm() < 1e-9, "{moved}");
 }
 
 #[test]
 fn a_swapped_object_changes_the_mesh_id_on_the_same_stream() {
     let tmp = tempfile::tempdir().unwrap();
-    let s = spec(&["sphere", "torus"], 6, SceneMotion::Swap { degrees: 90.0 }, Layout::SeparateTopics);
+    let s = spec(
+        &["sphere", "torus"],
+        6,
+        SceneMotion::Swap { degrees: 90.0 },
+        Layout::SeparateTopics,
+    );
     let streams = build_streams(&s).unwrap();
     assert_eq!(streams.len(), 1);
     let id = "/synth/sphere_then_torus/points";
     assert_eq!(streams[0].topic, id);
     let w = write_and_read(&s, &tmp.path().join("swap.mcap"));
     let track = &w.truth.streams[id];
-    let ids: Vec<&str> = track.frames.keys().map(|&t| track.mesh_at(t).unwrap().0).collect();
-    assert_eq!(ids, ["sphere", "sphere", "sphere", "torus", "torus", "torus"]);
+    let ids: Vec<&str> = track
+        .frames
+        .keys()
+        .map(|&t| track.mesh_at(t).unwrap().0)
+        .collect();
+    assert_eq!(
+        ids,
+        ["sphere", "sphere", "sphere", "torus", "torus", "torus"]
+    );
     // The torus's points lie on the torus: the cloud changes object with the truth.
     for (topic, stamp, cloud) in &w.clouds {
         let mesh = w.truth.posed_mesh(topic, *stamp).unwrap();
-        assert!(residuals(&cloud.points, &mesh, 5).iter().all(|r| r.abs() < 5.5));
+        assert!(residuals(&cloud.points, &mesh, 5)
+            .iter()
+            .all(|r| r.abs() < 5.5));
     }
     ground_truth_with_rosbags(&tmp.path().join("swap.mcap"), &s, &w.truth);
 }
@@ -336,14 +380,31 @@ fn rosbags_truth(bag: &Path) -> Option<Vec<serde_json::Value>> {
         return None;
     }
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/ground_truth.py");
-    let out = Command::new("python3").arg(script).arg(bag).output().unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = Command::new("python3")
+        .arg(script)
+        .arg(bag)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let text = String::from_utf8(out.stdout).unwrap();
-    Some(text.lines().map(|l| serde_json::from_str(l).unwrap()).collect())
+    Some(
+        text.lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect(),
+    )
 }
 
 fn pose_of(v: &serde_json::Value) -> Isometry3<f64> {
-    let c: Vec<f64> = v.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+    let c: Vec<f64> = v
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
     Isometry3::from_parts(
         nalgebra::Translation3::new(c[0], c[1], c[2]),
         UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(c[6], c[3], c[4], c[5])),
@@ -362,7 +423,8 @@ fn ground_truth_with_rosbags(bag: &Path, spec: &SequenceSpec, truth: &GroundTrut
     let mut sent = std::collections::BTreeSet::new();
     for m in &msgs {
         let stream = streams.iter().find(|s| s.topic == m["stream_id"]).unwrap();
-        let k = ((m["stamp"].as_i64().unwrap() - sepmem::synth::sequence::START_NS) / 100_000_000) as usize;
+        let k = ((m["stamp"].as_i64().unwrap() - sepmem::synth::sequence::START_NS) / 100_000_000)
+            as usize;
         let obj = stream
             .scene
             .objects
@@ -378,7 +440,12 @@ fn ground_truth_with_rosbags(bag: &Path, spec: &SequenceSpec, truth: &GroundTrut
         assert!(pose_of(&m["camera_pose"]).rotation.angle_to(&cam.rotation) < 1e-9);
         assert_eq!(m["world_frame_id"], "world");
         assert_eq!(m["frame_id"], "camera_depth_optical_frame");
-        let intr: Vec<f64> = m["intrinsics"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+        let intr: Vec<f64> = m["intrinsics"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
         assert_eq!(intr, [640.0, 480.0, 525.0, 525.0, 320.0, 240.0]);
         let first = sent.insert(obj.name.clone());
         let want_v = if first { obj.mesh.vertices.len() } else { 0 };
@@ -389,7 +456,12 @@ fn ground_truth_with_rosbags(bag: &Path, spec: &SequenceSpec, truth: &GroundTrut
 #[test]
 fn ground_truth_of_an_orbit_decodes_with_rosbags() {
     let tmp = tempfile::tempdir().unwrap();
-    let s = spec(&["ellipsoid"], 4, SceneMotion::Orbit { degrees: 360.0 }, Layout::SeparateTopics);
+    let s = spec(
+        &["ellipsoid"],
+        4,
+        SceneMotion::Orbit { degrees: 360.0 },
+        Layout::SeparateTopics,
+    );
     let path = tmp.path().join("orbit");
     let w = write_and_read(&s, &path);
     ground_truth_with_rosbags(&path, &s, &w.truth);
@@ -402,16 +474,52 @@ fn synth_cli_takes_intrinsics_motions_and_rejects_bad_ones() {
     let run = |args: &[&str]| Command::new(bin).arg("synth").args(args).output().unwrap();
     let out = tmp.path().join("a.mcap");
     let o = out.to_str().unwrap();
-    let ok = run(&["-o", o, "--shapes", "mug", "--frames", "3", "--motion", "turn", "--degrees", "360",
-        "--width", "320", "--height", "240", "--focal", "262.5", "--flying-pixels", "0.5", "--quiet"]);
-    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    let ok = run(&[
+        "-o",
+        o,
+        "--shapes",
+        "mug",
+        "--frames",
+        "3",
+        "--motion",
+        "turn",
+        "--degrees",
+        "360",
+        "--width",
+        "320",
+        "--height",
+        "240",
+        "--focal",
+        "262.5",
+        "--flying-pixels",
+        "0.5",
+        "--quiet",
+    ]);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
     let bag = Bag::open(&out).unwrap();
     let truth = GroundTruthIndex::from_bag(&bag).unwrap();
-    let f = truth.streams["/synth/mug/points"].frames.values().next().unwrap();
-    assert_eq!((f.camera.width, f.camera.height, f.camera.fx), (320, 240, 262.5));
+    let f = truth.streams["/synth/mug/points"]
+        .frames
+        .values()
+        .next()
+        .unwrap();
+    assert_eq!(
+        (f.camera.width, f.camera.height, f.camera.fx),
+        (320, 240, 262.5)
+    );
     for (args, needle) in [
-        (vec!["--points", "100", "--focal", "500"], "cannot be used with"),
-        (vec!["--motion", "spin"], "expected drift, turn, orbit, pick or swap"),
+        (
+            vec!["--points", "100", "--focal", "500"],
+            "cannot be used with",
+        ),
+        (
+            vec!["--motion", "spin"],
+            "expected drift, turn, orbit, pick or swap",
+        ),
         (vec!["--motion", "turn", "--degrees", "400"], "0–360"),
         (vec!["--motion", "swap"], "swap needs two or more shapes"),
         (vec!["--flying-pixels", "1.5"], "flying-pixel probability"),
@@ -421,7 +529,10 @@ fn synth_cli_takes_intrinsics_motions_and_rejects_bad_ones() {
         a.extend(args.iter());
         let bad = run(&a);
         let err = String::from_utf8_lossy(&bad.stderr);
-        assert!(!bad.status.success() && err.contains(needle), "{args:?}: {err}");
+        assert!(
+            !bad.status.success() && err.contains(needle),
+            "{args:?}: {err}"
+        );
     }
 }
 
@@ -434,13 +545,21 @@ fn committed_turning_mug_is_what_the_script_says() {
     let truth = GroundTruthIndex::from_bag(&bag).unwrap();
     let track = &truth.streams[id];
     assert_eq!(track.frames.len(), 30);
-    let (first, last) = (track.frames.values().next().unwrap(), track.frames.values().last().unwrap());
+    let (first, last) = (
+        track.frames.values().next().unwrap(),
+        track.frames.values().last().unwrap(),
+    );
     assert_eq!(first.camera, Camera::kinect());
-    assert!((first.pose.rotation.angle_to(&last.pose.rotation) - std::f64::consts::PI).abs() < 1e-9);
+    assert!(
+        (first.pose.rotation.angle_to(&last.pose.rotation) - std::f64::consts::PI).abs() < 1e-9
+    );
     for (k, m) in bag.read(&[id]).unwrap().enumerate().step_by(10) {
         let d = decode_pointcloud2_cdr(&m.data, &WireConfig::default()).unwrap();
         let stamp = d.header.stamp.to_nanos();
-        assert_eq!(d.cloud.len(), truth.frame(id, stamp).unwrap().visible_points as usize);
+        assert_eq!(
+            d.cloud.len(),
+            truth.frame(id, stamp).unwrap().visible_points as usize
+        );
         let mesh = truth.posed_mesh(id, stamp).unwrap();
         let r = residuals(&d.cloud.points, &mesh, 7);
         assert!(r.iter().all(|r| r.abs() < 5.5), "frame {k}");

@@ -100,7 +100,9 @@ pub fn run(a: &SynthArgs) -> Result<()> {
     let spec = SequenceSpec {
         shapes: a.shapes.clone(),
         frames: a.frames,
-        points_per_object: a.points.unwrap_or(SequenceSpec::default().points_per_object),
+        points_per_object: a
+            .points
+            .unwrap_or(SequenceSpec::default().points_per_object),
         intrinsics: match a.points {
             Some(_) => None,
             None => Some(Camera::with_resolution(a.width, a.height, a.focal)),

@@ -213,7 +213,10 @@ mod tests {
             let cam = path.pose_at(k);
             // The centre, seen from the camera, stays straight ahead at 1 m.
             let seen = cam.inverse() * nalgebra::Point3::from(c);
-            assert!((seen.coords - Vec3::new(0.0, 0.0, 1.0)).norm() < 1e-12, "{k}");
+            assert!(
+                (seen.coords - Vec3::new(0.0, 0.0, 1.0)).norm() < 1e-12,
+                "{k}"
+            );
         }
         // Half way round the camera stands behind the centre.
         let back = path.pose_at(10).translation.vector;

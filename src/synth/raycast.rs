@@ -52,13 +52,20 @@ impl MeshCaster {
         if mesh.triangles.iter().flatten().any(|&i| i as usize >= nv) {
             return Err(RaycastError::BadMesh("triangle index out of range".into()));
         }
-        if mesh.vertices.iter().any(|v| !v.iter().all(|c| c.is_finite())) {
+        if mesh
+            .vertices
+            .iter()
+            .any(|v| !v.iter().all(|c| c.is_finite()))
+        {
             return Err(RaycastError::BadMesh("non-finite vertex".into()));
         }
         let normals = (0..mesh.triangles.len())
             .map(|t| {
                 let [a, b, c] = mesh.corners(t);
-                (b - a).cross(&(c - a)).try_normalize(0.0).unwrap_or_default()
+                (b - a)
+                    .cross(&(c - a))
+                    .try_normalize(0.0)
+                    .unwrap_or_default()
             })
             .collect();
         let vertices = mesh.vertices.iter().map(|v| Point3::from(*v)).collect();
@@ -70,7 +77,9 @@ impl MeshCaster {
     /// The first hit along `origin + t·dir` with `0 ≤ t ≤ max_t`, if any.
     pub fn first_hit(&self, origin: &Vec3, dir: &Vec3, max_t: f64) -> Option<Hit> {
         let ray = Ray::new(Point3::from(*origin), Vector3::from(*dir));
-        let hit = self.shape.cast_local_ray_and_get_normal(&ray, max_t, false)?;
+        let hit = self
+            .shape
+            .cast_local_ray_and_get_normal(&ray, max_t, false)?;
         let n = self.normals.len() as u32;
         let triangle = match hit.feature {
             // parry numbers back-face hits after the front faces.
@@ -93,7 +102,11 @@ impl MeshCaster {
     /// Whether `p` is inside the closed mesh: the parity of the crossings of
     /// a ray from `p` in a fixed, axis-skew direction.
     pub fn contains(&self, p: &Vec3) -> bool {
-        const DIR: Vec3 = Vec3::new(0.534_522_483_824_848_8, 0.267_261_241_912_424_4, 0.801_783_725_737_273_2);
+        const DIR: Vec3 = Vec3::new(
+            0.534_522_483_824_848_8,
+            0.267_261_241_912_424_4,
+            0.801_783_725_737_273_2,
+        );
         let mut origin = *p;
         let mut inside = false;
         // Each crossing moves the origin just past the hit; bounded by the triangle count.

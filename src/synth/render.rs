@@ -70,7 +70,9 @@ impl Renderer {
         let m = self.measure(scene, &targets, &mut rng);
         let mut counts = vec![(0usize, 0usize); targets.len()];
         m.target_of.iter().for_each(|&t| counts[t as usize].0 += 1);
-        m.flying_target.iter().for_each(|&t| counts[t as usize].1 += 1);
+        m.flying_target
+            .iter()
+            .for_each(|&t| counts[t as usize].1 += 1);
         let (visible, flying) = (m.points.len(), m.flying.len());
         let mut points = m.points;
         points.extend_from_slice(&m.flying);
@@ -88,7 +90,10 @@ impl Renderer {
         }
         let target_of: Vec<u32> = m.target_of.into_iter().chain(m.flying_target).collect();
         let shade: Vec<f32> = m.shade.into_iter().chain(m.flying_shade).collect();
-        let labelled: Vec<usize> = target_of.iter().map(|&t| targets[t as usize].object).collect();
+        let labelled: Vec<usize> = target_of
+            .iter()
+            .map(|&t| targets[t as usize].object)
+            .collect();
         let attributes = attributes(scene, &labelled, &shade, n_out, &mut rng);
         let truth = targets
             .iter()

@@ -339,12 +339,19 @@ fn validate(spec: &SequenceSpec) -> Result<(), SequenceError> {
     if !(spec.distance > 2.0 * spec.object_size && spec.distance.is_finite()) {
         return invalid("distance", "must exceed twice the object size");
     }
-    if spec.motion.degrees().is_some_and(|d| !(0.0..=360.0).contains(&d)) {
+    if spec
+        .motion
+        .degrees()
+        .is_some_and(|d| !(0.0..=360.0).contains(&d))
+    {
         return invalid("degrees", "the total turn must be within 0–360°");
     }
     if let SceneMotion::Swap { .. } = spec.motion {
         if spec.shapes.len() < 2 || spec.frames < spec.shapes.len() {
-            return invalid("motion", "swap needs two or more shapes and a frame for each");
+            return invalid(
+                "motion",
+                "swap needs two or more shapes and a frame for each",
+            );
         }
     }
     if let Some(cam) = &spec.intrinsics {
@@ -410,7 +417,12 @@ pub fn build_objects(spec: &SequenceSpec) -> Result<Vec<SceneObject>, SequenceEr
     let swap = matches!(spec.motion, SceneMotion::Swap { .. });
     let spacing = 1.5 * spec.object_size;
     let mut objects = Vec::with_capacity(n);
-    for (i, (shape, name)) in spec.shapes.iter().zip(unique_names(&spec.shapes)).enumerate() {
+    for (i, (shape, name)) in spec
+        .shapes
+        .iter()
+        .zip(unique_names(&spec.shapes))
+        .enumerate()
+    {
         let mesh = centred_scaled(&shape_mesh(shape, spec.mesh_resolution)?, spec.object_size)?;
         let x = if swap {
             0.0

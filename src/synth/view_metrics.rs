@@ -117,7 +117,9 @@ impl VolumeIou {
 /// above 1000.
 pub fn volume_iou(a: &TriMesh, b: &TriMesh, cells: usize) -> Result<VolumeIou, RaycastError> {
     if cells == 0 || cells > 1000 {
-        return Err(RaycastError::BadMesh(format!("grid of {cells} cells: need 1..=1000")));
+        return Err(RaycastError::BadMesh(format!(
+            "grid of {cells} cells: need 1..=1000"
+        )));
     }
     let (ca, cb) = (MeshCaster::new(a)?, MeshCaster::new(b)?);
     let mut bb: Aabb = a.aabb();
@@ -206,7 +208,9 @@ impl Coverage {
         let samples = (0..samples)
             .map(|_| {
                 let x = rng.random::<f64>() * total;
-                let t = cumulative.partition_point(|&c| c < x).min(cumulative.len() - 1);
+                let t = cumulative
+                    .partition_point(|&c| c < x)
+                    .min(cumulative.len() - 1);
                 let [a, b, c] = mesh.corners(t);
                 let (mut u, mut v) = (rng.random::<f64>(), rng.random::<f64>());
                 if u + v > 1.0 {
@@ -287,7 +291,10 @@ mod tests {
         let exact = seen_side_accuracy(&cam, &truth, &truth, 1e-6).unwrap();
         // The disc of pixels seen: π (f r / √(d² − r²))².
         let disc = PI * (525.0 * 0.1 / (1.0f64 - 0.01).sqrt()).powi(2);
-        assert!((exact.rays as f64 - disc).abs() < 0.02 * disc, "{exact:?} vs {disc}");
+        assert!(
+            (exact.rays as f64 - disc).abs() < 0.02 * disc,
+            "{exact:?} vs {disc}"
+        );
         assert_eq!(exact.accuracy(), Some(1.0));
         // A sphere 2 mm smaller: every central ray is 2 mm off, so τ = 1 mm
         // rejects the rays where the depth gap exceeds it (all of them: the
@@ -310,7 +317,12 @@ mod tests {
         assert!((a - want).abs() < 0.05, "{a} vs {want}");
         // Offset by 5 mm along the view axis: no ray within 1 mm.
         let behind = sphere(0.1, c + Vec3::new(0.0, 0.0, 0.005));
-        assert_eq!(seen_side_accuracy(&cam, &truth, &behind, 0.001).unwrap().within, 0);
+        assert_eq!(
+            seen_side_accuracy(&cam, &truth, &behind, 0.001)
+                .unwrap()
+                .within,
+            0
+        );
     }
 
     #[test]
@@ -323,8 +335,16 @@ mod tests {
         let ball = 4.0 / 3.0 * PI * r * r * r;
         let lens = PI * (4.0 * r + d) * (2.0 * r - d).powi(2) / 12.0;
         let want = lens / (2.0 * ball - lens);
-        assert!((v.volume_a - ball).abs() < 0.02 * ball, "{} vs {ball}", v.volume_a);
-        assert!((v.iou().unwrap() - want).abs() < 0.02, "{:?} vs {want}", v.iou());
+        assert!(
+            (v.volume_a - ball).abs() < 0.02 * ball,
+            "{} vs {ball}",
+            v.volume_a
+        );
+        assert!(
+            (v.iou().unwrap() - want).abs() < 0.02,
+            "{:?} vs {want}",
+            v.iou()
+        );
         let same = volume_iou(&a, &a, 40).unwrap();
         assert_eq!(same.iou(), Some(1.0));
         let apart = volume_iou(&a, &sphere(r, Vec3::new(0.3, 0.0, 0.0)), 40).unwrap();
@@ -359,7 +379,11 @@ mod tests {
         let front = Isometry3::translation(0.0, 0.0, d);
         cov.observe(&cam, &front);
         let cap = (1.0 - r / d) / 2.0;
-        assert!((cov.share() - cap).abs() < 0.015, "{} vs {cap}", cov.share());
+        assert!(
+            (cov.share() - cap).abs() < 0.015,
+            "{} vs {cap}",
+            cov.share()
+        );
         // The same view again adds nothing; the opposite view adds its own cap.
         cov.observe(&cam, &front);
         assert!((cov.share() - cap).abs() < 0.015);
