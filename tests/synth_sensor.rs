@@ -14,7 +14,7 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-use nalgebra::{Isometry3, Point3, UnitQuaternion};
+use nalgebra::{Isometry3, UnitQuaternion};
 use sepmem::bag::Bag;
 use sepmem::cloud::Vec3;
 use sepmem::mesh::TriMesh;
@@ -94,6 +94,7 @@ fn write_and_read(spec: &SequenceSpec, path: &Path) -> Written {
     let clouds = bag
         .read(&refs)
         .unwrap()
+        .into_iter()
         .map(|m| {
             let d = decode_pointcloud2_cdr(&m.data, &WireConfig::default()).unwrap();
             (m.topic.clone(), d.header.stamp.to_nanos(), d.cloud)
@@ -553,7 +554,7 @@ fn committed_turning_mug_is_what_the_script_says() {
     assert!(
         (first.pose.rotation.angle_to(&last.pose.rotation) - std::f64::consts::PI).abs() < 1e-9
     );
-    for (k, m) in bag.read(&[id]).unwrap().enumerate().step_by(10) {
+    for (k, m) in bag.read(&[id]).unwrap().into_iter().enumerate().step_by(10) {
         let d = decode_pointcloud2_cdr(&m.data, &WireConfig::default()).unwrap();
         let stamp = d.header.stamp.to_nanos();
         assert_eq!(
