@@ -251,6 +251,26 @@ fn ground_truth() -> GroundTruth {
                 w: 0.8,
             },
         },
+        world_frame_id: "world".into(),
+        camera_pose: Pose {
+            position: Point {
+                x: -0.5,
+                y: 0.25,
+                z: 0.125,
+            },
+            orientation: Quaternion {
+                x: 0.6,
+                y: 0.0,
+                z: 0.0,
+                w: 0.8,
+            },
+        },
+        width: 640,
+        height: 480,
+        fx: 525.0,
+        fy: 526.5,
+        cx: 319.5,
+        cy: 239.25,
         visible_points: 1234,
         vertices: vec![
             Point {

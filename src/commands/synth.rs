@@ -1,14 +1,15 @@
 //! `sepmem synth`: write a synthetic depth-camera sequence of moving objects
-//! as a rosbag2 MCAP bag with a ground-truth side channel. The argument
-//! parsing lives here; scene building and writing are
-//! [`sepmem::synth::sequence`].
+//! (pixel rays of a pinhole camera cast against the posed meshes) as a
+//! rosbag2 MCAP bag with a ground-truth side channel. The argument parsing
+//! lives here; scene building and writing are [`sepmem::synth::sequence`].
 
 use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use sepmem::synth::sequence::{
-    parse_noise, write_sequence, Layout, SequenceSpec, GROUND_TRUTH_TOPIC,
+    parse_noise, write_sequence, Layout, SceneMotion, SequenceSpec, GROUND_TRUTH_TOPIC,
 };
+use sepmem::synth::{Camera, FlyingPixels};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
@@ -25,13 +26,38 @@ pub struct SynthArgs {
     /// Number of frames.
     #[arg(long, default_value_t = 30)]
     frames: usize,
-    /// Approximate visible points per object and frame (sets the focal length).
-    #[arg(long, default_value_t = 20_000)]
-    points: usize,
+    /// Legacy point budget: approximate visible points per object and frame,
+    /// reached by choosing the focal length (Kinect field of view) instead of
+    /// the fixed intrinsics of --width/--height/--focal.
+    #[arg(long, conflicts_with_all = ["width", "height", "focal"])]
+    points: Option<usize>,
+    /// Image width of the depth camera (pixels).
+    #[arg(long, default_value_t = 640)]
+    width: usize,
+    /// Image height of the depth camera (pixels).
+    #[arg(long, default_value_t = 480)]
+    height: usize,
+    /// Focal length of the depth camera (pixels; principal point at the image centre).
+    #[arg(long, default_value_t = 525.0)]
+    focal: f64,
+    /// Motion: `drift` (drift, wobble and spin), `turn` (each object turns in
+    /// place about the vertical by --degrees), `orbit` (the camera orbits the
+    /// still objects by --degrees), `pick` (each object is picked up, carried
+    /// and set down), `swap` (the shapes follow one another on one stream,
+    /// turning by --degrees).
+    #[arg(long, default_value = "drift")]
+    motion: String,
+    /// Total angle of `turn`, `orbit` and `swap` over the sequence (0–360°).
+    #[arg(long, default_value_t = 180.0)]
+    degrees: f64,
+    /// Flying pixels: the chance that a pixel on a depth edge returns a mixed
+    /// depth between its surface and the one behind (default: none).
+    #[arg(long)]
+    flying_pixels: Option<f64>,
     /// Frame rate (Hz) of the stamps.
     #[arg(long, default_value_t = 10.0)]
     rate: f64,
-    /// Depth noise: `kinect` (σ = 1.2 mm + 1.9e-3·z², 1 % outliers), `none`, or σ in metres.
+    /// Depth noise: `kinect` (σ = 1.2 mm + 1.9e-3·(z − 0.4)², 1 % outliers), `none`, or σ in metres.
     #[arg(long, default_value = "kinect")]
     noise: String,
     /// Outlier fraction (of the visible points), overriding the noise model's.
@@ -70,10 +96,18 @@ pub fn run(a: &SynthArgs) -> Result<()> {
     if let Some(f) = a.outliers {
         noise.outlier_fraction = f;
     }
+    noise.flying = a.flying_pixels.map(FlyingPixels::with_probability);
     let spec = SequenceSpec {
         shapes: a.shapes.clone(),
         frames: a.frames,
-        points_per_object: a.points,
+        points_per_object: a
+            .points
+            .unwrap_or(SequenceSpec::default().points_per_object),
+        intrinsics: match a.points {
+            Some(_) => None,
+            None => Some(Camera::with_resolution(a.width, a.height, a.focal)),
+        },
+        motion: SceneMotion::parse(&a.motion, a.degrees)?,
         rate_hz: a.rate,
         noise,
         colour: a.colour,

@@ -1,33 +1,44 @@
-//! Sensor simulation: what a depth camera would see of moving meshes.
+//! Sensor simulation: what a depth camera sees of posed meshes.
 //!
-//! A pinhole depth camera (optical frame: x right, y down, z forward, at the
-//! origin) renders one or more posed triangle meshes with a z-buffer, so
-//! only the surface visible from the camera produces points and objects
-//! occlude each other. Each covered pixel becomes one point, back-projected
-//! from a noisy depth: the axial noise is Gaussian with the Kinect-like
-//! depth dependence σ(z) = σ₀ + k·z² (Khoshelham & Elberink 2012; Nguyen et
-//! al. 2012). Surfaces seen at grazing incidence return no depth, as on a
-//! real sensor. Optionally a fraction of outliers is added, uniform in the
-//! visible scene's bounding box enlarged by a margin, and every point can
-//! carry the object's colour (shaded by incidence; outliers dark random)
-//! and a segment label (`label` channel; outliers get label 0).
+//! A pinhole depth camera (optical frame: x right, y down, z forward; default
+//! 640×480 px, f = 525 px) casts one ray through the centre of every pixel
+//! against the posed triangle meshes ([`raycast`], a bounding volume
+//! hierarchy), so each pixel measures the first surface along its ray: self-
+//! and inter-object occlusion are exact, and the density of the points falls
+//! with range (∝ 1/z²) and with incidence (∝ cos θ) as on a real sensor.
+//! Surfaces seen at grazing incidence return no depth. Each measured pixel
+//! becomes one point, back-projected from a noisy depth: the axial noise is
+//! Gaussian with σ(z) = σ₀ + k·(z − z₀)², Kinect: 0.0012 + 0.0019 (z − 0.4)² m
+//! (Nguyen, Izadi & Lovell 2012). Optionally the pixels on a depth edge
+//! return mixed depths between the foreground and what lies behind it
+//! (flying pixels, [`FlyingPixels`]), and a fraction of outliers is added,
+//! uniform in the visible scene's bounding box enlarged by a margin. Every
+//! point can carry the object's colour (shaded by incidence; outliers dark
+//! random) and a segment label (`label` channel; outliers get label 0).
 //!
 //! These are the partial, one-sided views that the membrane must close
 //! (paper §III: the membrane wraps the actual points 𝒫; the unseen side has
-//! no data at all). [`Motion`] moves objects smoothly over frames; the
-//! ground-truth pose of every object is returned with each frame so that
-//! every frame can be scored. Everything is deterministic for a seed
-//! (ChaCha8, one stream per frame).
+//! no data at all). Objects and the camera move in a world frame
+//! ([`motion`]: turning, pick and place, drift; the camera may orbit); the
+//! ground-truth pose of every object, the camera pose and the mesh id are
+//! returned with each frame so that every frame can be scored. Everything is
+//! deterministic for a seed (ChaCha8, one stream per frame).
 
+pub mod motion;
+pub mod raycast;
+mod render;
 pub mod sequence;
 pub mod truth;
+pub mod view_metrics;
 
-use crate::cloud::{Aabb, Attribute, PointCloud, Vec3};
+pub use motion::{CameraPath, Drift, Motion};
+pub use render::Renderer;
+
+use std::ops::Range;
+
+use crate::cloud::{PointCloud, Vec3};
 use crate::mesh::TriMesh;
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-use rand_distr::StandardNormal;
+use nalgebra::Isometry3;
 use thiserror::Error;
 
 /// Errors of the sensor simulation.
@@ -51,7 +62,7 @@ pub enum SynthError {
     },
 }
 
-/// Pinhole depth camera at the origin, looking along +z (ROS optical frame).
+/// Pinhole depth camera: its intrinsics, in its optical frame (x right, y down, z forward).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Camera {
     /// Image width in pixels.
@@ -92,7 +103,26 @@ impl Camera {
         }
     }
 
-    fn validate(&self) -> Result<(), SynthError> {
+    /// The ray through the centre of pixel `(i, j)`, scaled to unit depth
+    /// (`z = 1`), so that its parameter along the ray is the depth.
+    pub fn pixel_ray(&self, i: usize, j: usize) -> Vec3 {
+        Vec3::new(
+            (i as f64 + 0.5 - self.cx) / self.fx,
+            (j as f64 + 0.5 - self.cy) / self.fy,
+            1.0,
+        )
+    }
+
+    /// The image position `(u, v)` of a point in front of the camera.
+    pub fn project(&self, p: &Vec3) -> Option<(f64, f64)> {
+        (p.z > 0.0).then(|| (self.fx * p.x / p.z + self.cx, self.fy * p.y / p.z + self.cy))
+    }
+
+    /// Check the intrinsics and depth range.
+    ///
+    /// # Errors
+    /// [`SynthError::InvalidParameter`] naming the bad field.
+    pub fn validate(&self) -> Result<(), SynthError> {
         let bad = |name, reason: &str| {
             Err(SynthError::InvalidParameter {
                 name,
@@ -104,6 +134,9 @@ impl Camera {
         }
         if !(self.fx > 0.0 && self.fy > 0.0 && self.fx.is_finite() && self.fy.is_finite()) {
             return bad("camera.fx/fy", "must be positive and finite");
+        }
+        if !(self.cx.is_finite() && self.cy.is_finite()) {
+            return bad("camera.cx/cy", "must be finite");
         }
         if !(self.min_depth > 0.0 && self.max_depth > self.min_depth) {
             return bad(
@@ -120,8 +153,10 @@ impl Camera {
 pub struct Noise {
     /// Constant part σ₀ of the axial depth noise (m).
     pub sigma_const: f64,
-    /// Quadratic coefficient k of σ(z) = σ₀ + k·z² (1/m); Kinect ≈ 0.0019.
+    /// Quadratic coefficient k of σ(z) = σ₀ + k·(z − z₀)² (1/m); Kinect 0.0019.
     pub sigma_quadratic: f64,
+    /// Depth z₀ (m) of least noise in σ(z) = σ₀ + k·(z − z₀)²; Kinect 0.4.
+    pub sigma_depth: f64,
     /// Outliers added, as a fraction of the visible points.
     pub outlier_fraction: f64,
     /// Margin (m) by which the visible bounding box is enlarged for outliers.
@@ -129,6 +164,35 @@ pub struct Noise {
     /// Incidence angle (degrees, between the view ray and the surface normal)
     /// beyond which the sensor returns no depth.
     pub max_incidence_deg: f64,
+    /// Mixed depths at depth edges, if simulated.
+    pub flying: Option<FlyingPixels>,
+}
+
+/// Flying pixels: a pixel on a depth edge (a 4-neighbour lies farther by
+/// more than `min_jump`, or sees nothing) returns, with probability
+/// `probability`, a depth uniform between its own surface and the surface
+/// behind the edge (at most `max_spread` behind), as the mixed returns of a
+/// time-of-flight or structured-light sensor do. It keeps the foreground
+/// object's label; it lies on no surface.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FlyingPixels {
+    /// Chance that an edge pixel flies.
+    pub probability: f64,
+    /// Smallest depth step (m) between neighbours that counts as an edge.
+    pub min_jump: f64,
+    /// Farthest a flying pixel lies behind its surface (m).
+    pub max_spread: f64,
+}
+
+impl FlyingPixels {
+    /// Edge pixels fly with `probability`; a 2 cm step is an edge; at most 10 cm behind.
+    pub fn with_probability(probability: f64) -> Self {
+        Self {
+            probability,
+            min_jump: 0.02,
+            max_spread: 0.1,
+        }
+    }
 }
 
 impl Noise {
@@ -140,28 +204,39 @@ impl Noise {
             outlier_fraction: 0.0,
             outlier_margin: 0.0,
             max_incidence_deg: 90.0,
+            sigma_depth: 0.0,
+            flying: None,
         }
     }
 
-    /// Kinect-like: σ(z) = 0.0012 + 0.0019·z² (1.3 mm at 0.3 m, 3.1 mm at 1 m), 1 % outliers.
+    /// Kinect (Nguyen et al. 2012): σ(z) = 0.0012 + 0.0019·(z − 0.4)² m
+    /// (1.2 mm at 0.4 m, 1.9 mm at 1 m, 5.5 mm at 2 m), 1 % outliers, no
+    /// return beyond 80° incidence, no flying pixels.
     pub fn kinect() -> Self {
         Self {
             sigma_const: 0.0012,
             sigma_quadratic: 0.0019,
+            sigma_depth: 0.4,
             outlier_fraction: 0.01,
             outlier_margin: 0.05,
             max_incidence_deg: 80.0,
+            flying: None,
         }
     }
 
     /// Axial standard deviation at depth `z`.
     pub fn sigma(&self, z: f64) -> f64 {
-        self.sigma_const + self.sigma_quadratic * z * z
+        self.sigma_const + self.sigma_quadratic * (z - self.sigma_depth).powi(2)
     }
 
     fn validate(&self) -> Result<(), SynthError> {
-        let ok = self.sigma_const >= 0.0
+        let flying_ok = self.flying.is_none_or(|f| {
+            (0.0..=1.0).contains(&f.probability) && f.min_jump > 0.0 && f.max_spread >= 0.0
+        });
+        let ok = flying_ok
+            && self.sigma_const >= 0.0
             && self.sigma_quadratic >= 0.0
+            && self.sigma_depth.is_finite()
             && (0.0..=10.0).contains(&self.outlier_fraction)
             && self.outlier_margin >= 0.0
             && self.max_incidence_deg > 0.0
@@ -172,52 +247,11 @@ impl Noise {
             Err(SynthError::InvalidParameter {
                 name: "noise",
                 reason: format!(
-                    "{self:?}: need σ ≥ 0, outlier fraction in [0, 10], incidence in (0, 90]"
+                    "{self:?}: need σ ≥ 0, outlier fraction in [0, 10], incidence in (0, 90], \
+                     flying-pixel probability in [0, 1], jump > 0, spread ≥ 0"
                 ),
             })
         }
-    }
-}
-
-/// Smooth rigid motion: `pose(k) = start · T(v·k + a·sin(2πk/P)) · R(ω·k)`,
-/// the rotation being about the object's own origin.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Motion {
-    /// Translation per frame (m), in the camera frame.
-    pub velocity: Vec3,
-    /// Rotation per frame as a scaled axis (rad), in the object frame.
-    pub angular_velocity: Vec3,
-    /// Amplitude of a sinusoidal wobble added to the translation (m).
-    pub wobble: Vec3,
-    /// Period of the wobble in frames (ignored when the wobble is zero).
-    pub wobble_period: f64,
-}
-
-impl Motion {
-    /// No motion.
-    pub fn still() -> Self {
-        Self {
-            velocity: Vec3::zeros(),
-            angular_velocity: Vec3::zeros(),
-            wobble: Vec3::zeros(),
-            wobble_period: 1.0,
-        }
-    }
-
-    /// Pose at frame `k` given the pose at frame 0.
-    pub fn pose_at(&self, start: &Isometry3<f64>, k: usize) -> Isometry3<f64> {
-        let k = k as f64;
-        let wob = if self.wobble_period > 0.0 {
-            self.wobble * (std::f64::consts::TAU * k / self.wobble_period).sin()
-        } else {
-            Vec3::zeros()
-        };
-        let shift = Translation3::from(self.velocity * k + wob);
-        let spin = UnitQuaternion::from_scaled_axis(self.angular_velocity * k);
-        let mut pose = *start;
-        pose.append_translation_mut(&shift);
-        pose.rotation *= spin;
-        pose
     }
 }
 
@@ -228,7 +262,7 @@ pub struct SceneObject {
     pub name: String,
     /// The mesh in its own frame (see [`centred_scaled`]).
     pub mesh: TriMesh,
-    /// Pose at frame 0 (object frame → camera frame).
+    /// Pose at frame 0 (object frame → world).
     pub start: Isometry3<f64>,
     /// Motion over the frames.
     pub motion: Motion,
@@ -236,13 +270,26 @@ pub struct SceneObject {
     pub label: u32,
     /// Base colour in `[0, 1]`.
     pub colour: [f32; 3],
+    /// Frames in which the object is in the scene (`None`: all of them). An
+    /// object swapped for another shares its label with the other and has a
+    /// disjoint range.
+    pub present: Option<Range<usize>>,
+}
+
+impl SceneObject {
+    /// Whether the object is in the scene at frame `k`.
+    pub fn present_at(&self, k: usize) -> bool {
+        self.present.as_ref().is_none_or(|r| r.contains(&k))
+    }
 }
 
 /// What to render.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scene {
-    /// The sensor.
+    /// The sensor's intrinsics.
     pub camera: Camera,
+    /// Where the sensor is, frame by frame.
+    pub camera_path: CameraPath,
     /// Noise model.
     pub noise: Noise,
     /// The objects.
@@ -258,14 +305,20 @@ pub struct Scene {
 /// Ground truth of one object in one frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ObjectTruth {
-    /// The object's name.
+    /// Index of the object in [`Scene::objects`].
+    pub object: usize,
+    /// The object's name (its mesh id).
     pub name: String,
     /// Its label.
     pub label: u32,
-    /// Its pose (object frame → camera frame).
+    /// Its pose (object frame → camera optical frame).
     pub pose: Isometry3<f64>,
-    /// Points of the frame that lie on it (before outliers).
+    /// Its pose in the world (object frame → world).
+    pub world_pose: Isometry3<f64>,
+    /// Points of the frame that lie on it (before flying pixels and outliers).
     pub visible_points: usize,
+    /// Flying pixels on its depth edges (labelled as it, on no surface).
+    pub flying_pixels: usize,
 }
 
 /// One rendered frame.
@@ -273,10 +326,15 @@ pub struct ObjectTruth {
 pub struct Frame {
     /// Frame number.
     pub index: usize,
-    /// The simulated measurement (camera frame).
+    /// The simulated measurement (camera frame): the surface points, then the
+    /// `flying` flying pixels, then the `outliers` outliers.
     pub cloud: PointCloud,
-    /// Ground truth of every object.
+    /// Camera pose (optical frame → world).
+    pub camera_pose: Isometry3<f64>,
+    /// Ground truth of every object present in the frame.
     pub truth: Vec<ObjectTruth>,
+    /// Number of flying pixels in `cloud` (after the surface points).
+    pub flying: usize,
     /// Number of outliers in `cloud` (they are its last points).
     pub outliers: usize,
 }
@@ -302,251 +360,6 @@ pub fn centred_scaled(mesh: &TriMesh, longest_edge: f64) -> Result<TriMesh, Synt
         *v = (*v - c) * s;
     }
     Ok(m)
-}
-
-/// Z-buffer renderer with reusable buffers.
-#[derive(Debug, Default)]
-pub struct Renderer {
-    depth: Vec<f64>,
-    /// Per pixel: object index (u32::MAX = empty) and triangle index.
-    hit: Vec<(u32, u32)>,
-    verts: Vec<Vec3>,
-    normals: Vec<Vec<Vec3>>,
-}
-
-impl Renderer {
-    /// A renderer (buffers grow on first use).
-    pub fn new() -> Self {
-        Self::default()
-    }
-
-    /// Render frame `index` of `scene`.
-    ///
-    /// # Errors
-    /// [`SynthError`] for invalid camera or noise parameters or a bad mesh.
-    pub fn render(&mut self, scene: &Scene, index: usize) -> Result<Frame, SynthError> {
-        scene.camera.validate()?;
-        scene.noise.validate()?;
-        let cam = scene.camera;
-        let npix = cam.width * cam.height;
-        self.depth.clear();
-        self.depth.resize(npix, f64::INFINITY);
-        self.hit.clear();
-        self.hit.resize(npix, (u32::MAX, 0));
-        self.normals.resize(scene.objects.len(), Vec::new());
-        let poses: Vec<Isometry3<f64>> = scene
-            .objects
-            .iter()
-            .map(|o| o.motion.pose_at(&o.start, index))
-            .collect();
-        for (oi, (obj, pose)) in scene.objects.iter().zip(&poses).enumerate() {
-            let nv = obj.mesh.vertices.len();
-            if obj
-                .mesh
-                .triangles
-                .iter()
-                .any(|t| t.iter().any(|&i| i as usize >= nv))
-            {
-                return Err(SynthError::BadMesh {
-                    object: obj.name.clone(),
-                    reason: "triangle index out of range".into(),
-                });
-            }
-            self.verts.clear();
-            self.verts.extend(
-                obj.mesh
-                    .vertices
-                    .iter()
-                    .map(|v| (pose * Point3::from(*v)).coords),
-            );
-            let normals = &mut self.normals[oi];
-            normals.clear();
-            for (ti, t) in obj.mesh.triangles.iter().enumerate() {
-                let [a, b, c] = t.map(|i| self.verts[i as usize]);
-                normals.push((b - a).cross(&(c - a)));
-                rasterise(
-                    &cam,
-                    [a, b, c],
-                    oi as u32,
-                    ti as u32,
-                    &mut self.depth,
-                    &mut self.hit,
-                );
-            }
-        }
-        // Back-project the covered pixels with noise.
-        let mut rng = ChaCha8Rng::seed_from_u64(
-            scene.seed
-                ^ (index as u64)
-                    .wrapping_add(1)
-                    .wrapping_mul(0x9E37_79B9_7F4A_7C15),
-        );
-        let cos_min = scene.noise.max_incidence_deg.to_radians().cos();
-        let mut points = Vec::new();
-        let mut obj_of = Vec::new();
-        let mut shade = Vec::new();
-        let mut counts = vec![0usize; scene.objects.len()];
-        for (pix, (&z, &(oi, ti))) in self.depth.iter().zip(&self.hit).enumerate() {
-            if oi == u32::MAX {
-                continue;
-            }
-            let u = (pix % cam.width) as f64 + 0.5;
-            let v = (pix / cam.width) as f64 + 0.5;
-            let ray = Vec3::new((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1.0);
-            let n = self.normals[oi as usize][ti as usize];
-            let cos = (n.dot(&ray) / (n.norm() * ray.norm())).abs();
-            if cos.is_nan() || cos < cos_min.max(1e-9) {
-                continue;
-            }
-            let sigma = scene.noise.sigma(z);
-            let zn = if sigma > 0.0 {
-                let e: f64 = rng.sample(StandardNormal);
-                z + sigma * e
-            } else {
-                z
-            };
-            if zn < cam.min_depth || zn > cam.max_depth {
-                continue;
-            }
-            points.push(ray * zn);
-            obj_of.push(oi);
-            shade.push(0.55 + 0.45 * cos as f32);
-            counts[oi as usize] += 1;
-        }
-        let visible = points.len();
-        // Outliers, uniform in the enlarged box of the visible points.
-        let n_out = (scene.noise.outlier_fraction * visible as f64).round() as usize;
-        if n_out > 0 {
-            let bb: Aabb = Aabb::from_points(&points).inflated(scene.noise.outlier_margin);
-            for _ in 0..n_out {
-                let p = Vec3::new(
-                    rng.random_range(bb.min.x..=bb.max.x),
-                    rng.random_range(bb.min.y..=bb.max.y),
-                    rng.random_range(bb.min.z..=bb.max.z),
-                );
-                points.push(p);
-            }
-        }
-        let mut attributes = Vec::new();
-        if scene.colour {
-            let mut ch = [
-                Vec::with_capacity(points.len()),
-                Vec::with_capacity(points.len()),
-                Vec::with_capacity(points.len()),
-            ];
-            for (&oi, &s) in obj_of.iter().zip(&shade) {
-                let c = scene.objects[oi as usize].colour;
-                for (chan, base) in ch.iter_mut().zip(c) {
-                    chan.push((base * s).clamp(0.0, 1.0));
-                }
-            }
-            for _ in 0..n_out {
-                for c in &mut ch {
-                    c.push(rng.random_range(0.0..0.15f32));
-                }
-            }
-            for (name, values) in ["r", "g", "b"].into_iter().zip(ch) {
-                attributes.push(Attribute {
-                    name: name.into(),
-                    values,
-                });
-            }
-        }
-        if scene.labels {
-            let mut l: Vec<f32> = obj_of
-                .iter()
-                .map(|&oi| scene.objects[oi as usize].label as f32)
-                .collect();
-            l.resize(points.len(), 0.0);
-            attributes.push(Attribute {
-                name: "label".into(),
-                values: l,
-            });
-        }
-        let truth = scene
-            .objects
-            .iter()
-            .zip(poses)
-            .zip(counts)
-            .map(|((o, pose), visible_points)| ObjectTruth {
-                name: o.name.clone(),
-                label: o.label,
-                pose,
-                visible_points,
-            })
-            .collect();
-        Ok(Frame {
-            index,
-            cloud: PointCloud { points, attributes },
-            truth,
-            outliers: n_out,
-        })
-    }
-}
-
-/// Rasterise one camera-frame triangle into the z-buffer (pixel centres,
-/// perspective-correct depth: 1/z is affine in the image).
-fn rasterise(
-    cam: &Camera,
-    tri: [Vec3; 3],
-    object: u32,
-    triangle: u32,
-    depth: &mut [f64],
-    hit: &mut [(u32, u32)],
-) {
-    if tri
-        .iter()
-        .any(|p| !p.iter().all(|c| c.is_finite()) || p.z < cam.min_depth)
-    {
-        return; // behind or too close to the camera: not measurable
-    }
-    let proj = tri.map(|p| {
-        (
-            cam.fx * p.x / p.z + cam.cx,
-            cam.fy * p.y / p.z + cam.cy,
-            1.0 / p.z,
-        )
-    });
-    let area = (proj[1].0 - proj[0].0) * (proj[2].1 - proj[0].1)
-        - (proj[2].0 - proj[0].0) * (proj[1].1 - proj[0].1);
-    if area.abs() < 1e-12 {
-        return;
-    }
-    let minx = proj.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
-    let maxx = proj.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
-    let miny = proj.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
-    let maxy = proj.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
-    // Pixel (i, j) has its centre at (i + 0.5, j + 0.5).
-    let x0 = (minx - 0.5).ceil().max(0.0);
-    let x1 = (maxx - 0.5).floor().min(cam.width as f64 - 1.0);
-    let y0 = (miny - 0.5).ceil().max(0.0);
-    let y1 = (maxy - 0.5).floor().min(cam.height as f64 - 1.0);
-    if x0 > x1 || y0 > y1 {
-        return;
-    }
-    let inv = 1.0 / area;
-    let edge = |a: (f64, f64, f64), b: (f64, f64, f64), x: f64, y: f64| {
-        (b.0 - a.0) * (y - a.1) - (b.1 - a.1) * (x - a.0)
-    };
-    for j in y0 as usize..=y1 as usize {
-        let y = j as f64 + 0.5;
-        for i in x0 as usize..=x1 as usize {
-            let x = i as f64 + 0.5;
-            let w0 = edge(proj[1], proj[2], x, y) * inv;
-            let w1 = edge(proj[2], proj[0], x, y) * inv;
-            let w2 = 1.0 - w0 - w1;
-            if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
-                continue;
-            }
-            let inv_z = w0 * proj[0].2 + w1 * proj[1].2 + w2 * proj[2].2;
-            let z = 1.0 / inv_z;
-            let k = j * cam.width + i;
-            if z < depth[k] {
-                depth[k] = z;
-                hit[k] = (object, triangle);
-            }
-        }
-    }
 }
 
 /// Render frames `0..n` of a scene (one renderer, reused buffers).
@@ -614,6 +427,7 @@ mod tests {
     fn one_object(mesh: TriMesh, at: Vec3, noise: Noise) -> Scene {
         Scene {
             camera: Camera::kinect(),
+            camera_path: CameraPath::Fixed,
             noise,
             objects: vec![SceneObject {
                 name: "o".into(),
@@ -622,6 +436,7 @@ mod tests {
                 motion: Motion::still(),
                 label: 20,
                 colour: [0.8, 0.2, 0.1],
+                present: None,
             }],
             colour: true,
             labels: true,
@@ -726,6 +541,7 @@ mod tests {
             motion: Motion::still(),
             label: 30,
             colour: [0.1, 0.1, 0.9],
+            present: None,
         });
         let f = Renderer::new().render(&scene, 0).unwrap();
         let (back, front) = (f.truth[0].visible_points, f.truth[1].visible_points);
@@ -749,12 +565,12 @@ mod tests {
 
     #[test]
     fn motion_follows_the_configured_velocity() {
-        let m = Motion {
+        let m = Motion::Drift(Drift {
             velocity: Vec3::new(0.01, 0.0, 0.0),
             angular_velocity: Vec3::new(0.0, 0.1, 0.0),
             wobble: Vec3::zeros(),
             wobble_period: 10.0,
-        };
+        });
         let start = Isometry3::translation(0.0, 0.0, 1.0);
         let p = m.pose_at(&start, 5);
         assert!((p.translation.vector - Vec3::new(0.05, 0.0, 1.0)).norm() < 1e-12);

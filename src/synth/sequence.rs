@@ -3,30 +3,38 @@
 //! and written as a rosbag2 MCAP bag (what `sepmem synth` does).
 //!
 //! Each object is scaled to a tabletop size, placed in front of the camera
-//! and moved smoothly (drift, sinusoidal wobble and a steady rotation about a
-//! tilted axis) over the frames. Objects are recorded either on one topic
-//! each (`/synth/<name>/points`, each object rendered as its own segmented
-//! stream) or together in one cloud on one topic, as segments told apart by
-//! the `label` field (labels 1, 2, …; outliers carry label 0). The ground
-//! truth of every object in every frame goes to [`GROUND_TRUTH_TOPIC`] as a
+//! and moved over the frames by one of the [`SceneMotion`]s: a smooth drift
+//! (sinusoidal wobble and a steady rotation about a tilted axis), a turn in
+//! place by up to 360°, a pick and place, the camera orbiting the static
+//! objects, or objects swapped one for the next on one stream. The camera
+//! has fixed intrinsics (default 640×480, f = 525) or, for the legacy point
+//! budget, the focal length that gives about that many points at frame 0.
+//! Objects are recorded either on one topic each (`/synth/<name>/points`,
+//! each object rendered as its own segmented stream) or together in one
+//! cloud on one topic, as segments told apart by the `label` field (labels
+//! 1, 2, …; outliers carry label 0). The ground truth of every object in
+//! every frame goes to [`GROUND_TRUTH_TOPIC`] as a
 //! `sepmem_msgs/msg/GroundTruth` whose `stream_id` is the
 //! [`StreamKey`](crate::stream::StreamKey) of the stream the object lands
-//! in (`topic` or `topic#label`) and whose stamp equals the cloud's; the mesh
-//! (in the object frame) is sent only in the stream's first message, so that
-//! every replayed frame can be scored against the full, closed surface even
-//! though the camera sees one side only (paper §III: the membrane wraps the
-//! measured points 𝒫 and must close the unseen side). Read the truth back
-//! with [`crate::synth::truth`].
+//! in (`topic` or `topic#label`) and whose stamp equals the cloud's. It
+//! carries the object pose in the camera frame, the camera pose in the world
+//! frame, the camera intrinsics and the mesh id; the mesh itself (in the
+//! object frame) is sent with the first message of each mesh id on a
+//! stream, so that every replayed frame can be scored against the full,
+//! closed surface even though the camera sees one side only (paper §III:
+//! the membrane wraps the measured points 𝒫 and must close the unseen side).
+//! Read the truth back with [`crate::synth::truth`].
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use thiserror::Error;
 
+use super::motion::UP;
 use super::{
-    centred_scaled, focal_for_points, Camera, Motion, Noise, Renderer, Scene, SceneObject,
-    SynthError,
+    centred_scaled, focal_for_points, Camera, CameraPath, Drift, Motion, Noise, Renderer, Scene,
+    SceneObject, SynthError,
 };
 use crate::bag::{BagError, BagWriter, Qos};
 use crate::cloud::Vec3;
@@ -91,6 +99,62 @@ pub enum Layout {
     },
 }
 
+/// How the objects (or the camera) move over a sequence.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SceneMotion {
+    /// Smooth drift, wobble and spin about a tilted axis (the legacy motion).
+    Drift,
+    /// Every object turns in place about the vertical by `degrees` over the sequence.
+    Turn {
+        /// Total angle, 0–360°.
+        degrees: f64,
+    },
+    /// The objects stand still; the camera orbits their centre about the
+    /// vertical by `degrees` over the sequence.
+    Orbit {
+        /// Total angle, 0–360°.
+        degrees: f64,
+    },
+    /// Every object is picked up, carried sideways and set down again.
+    PickPlace,
+    /// The objects appear one after another on one stream (one label), each
+    /// for an equal share of the frames, turning by `degrees` over the sequence.
+    Swap {
+        /// Total angle, 0–360°.
+        degrees: f64,
+    },
+}
+
+impl SceneMotion {
+    /// Parse `drift`, `turn`, `orbit`, `pick` or `swap`, with `degrees` for
+    /// the turning motions.
+    ///
+    /// # Errors
+    /// [`SequenceError::InvalidParameter`] for another name.
+    pub fn parse(name: &str, degrees: f64) -> Result<Self, SequenceError> {
+        match name {
+            "drift" => Ok(Self::Drift),
+            "turn" => Ok(Self::Turn { degrees }),
+            "orbit" => Ok(Self::Orbit { degrees }),
+            "pick" => Ok(Self::PickPlace),
+            "swap" => Ok(Self::Swap { degrees }),
+            other => Err(SequenceError::InvalidParameter {
+                name: "motion",
+                reason: format!("`{other}`: expected drift, turn, orbit, pick or swap"),
+            }),
+        }
+    }
+
+    fn degrees(&self) -> Option<f64> {
+        match self {
+            Self::Turn { degrees } | Self::Orbit { degrees } | Self::Swap { degrees } => {
+                Some(*degrees)
+            }
+            Self::Drift | Self::PickPlace => None,
+        }
+    }
+}
+
 /// Everything that defines a synthetic sequence.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SequenceSpec {
@@ -98,8 +162,14 @@ pub struct SequenceSpec {
     pub shapes: Vec<String>,
     /// Number of frames.
     pub frames: usize,
-    /// Approximate number of visible points per object and frame.
+    /// Approximate number of visible points per object and frame, reached
+    /// by choosing the focal length (Kinect field of view); used only when
+    /// `intrinsics` is `None`.
     pub points_per_object: usize,
+    /// Fixed camera intrinsics (e.g. [`Camera::kinect`]) instead of the point budget.
+    pub intrinsics: Option<Camera>,
+    /// How the objects or the camera move.
+    pub motion: SceneMotion,
     /// Frame rate (Hz): stamps are `START_NS + k / rate`.
     pub rate_hz: f64,
     /// Depth noise and outliers.
@@ -116,8 +186,10 @@ pub struct SequenceSpec {
     pub distance: f64,
     /// Tessellation resolution of the procedural shapes.
     pub mesh_resolution: usize,
-    /// `header.frame_id` of clouds and ground truth.
+    /// `header.frame_id` of clouds and ground truth (the camera's optical frame).
     pub frame_id: String,
+    /// The fixed frame in which the ground truth gives the camera pose.
+    pub world_frame_id: String,
 }
 
 impl Default for SequenceSpec {
@@ -126,6 +198,8 @@ impl Default for SequenceSpec {
             shapes: vec!["ellipsoid".into()],
             frames: 30,
             points_per_object: 20_000,
+            intrinsics: None,
+            motion: SceneMotion::Drift,
             rate_hz: 10.0,
             noise: Noise::kinect(),
             colour: false,
@@ -135,6 +209,7 @@ impl Default for SequenceSpec {
             distance: 1.0,
             mesh_resolution: 48,
             frame_id: "camera_depth_optical_frame".into(),
+            world_frame_id: "world".into(),
         }
     }
 }
@@ -235,76 +310,143 @@ fn shape_mesh(shape: &str, res: usize) -> Result<TriMesh, SequenceError> {
     Ok(loaded.mesh)
 }
 
-/// The scene objects of `spec`, in order: named uniquely, labelled 1, 2, …,
-/// placed side by side at `spec.distance` and given distinct smooth motions.
+/// Check the ranges of `spec`'s scalar parameters.
+fn validate(spec: &SequenceSpec) -> Result<(), SequenceError> {
+    let invalid = |name, reason: &str| {
+        Err(SequenceError::InvalidParameter {
+            name,
+            reason: reason.to_string(),
+        })
+    };
+    if spec.shapes.is_empty() {
+        return invalid("shapes", "at least one shape is needed");
+    }
+    if spec.shapes.len() > 64 {
+        return invalid("shapes", "at most 64 objects");
+    }
+    if spec.frames == 0 {
+        return invalid("frames", "must be at least 1");
+    }
+    if spec.points_per_object == 0 || spec.points_per_object > 2_000_000 {
+        return invalid("points", "must be in 1..=2000000");
+    }
+    if !(spec.rate_hz > 0.0 && spec.rate_hz.is_finite() && spec.rate_hz <= 1e6) {
+        return invalid("rate", "must be positive and finite (≤ 1 MHz)");
+    }
+    if !(spec.object_size > 0.0 && spec.object_size.is_finite()) {
+        return invalid("object_size", "must be positive and finite");
+    }
+    if !(spec.distance > 2.0 * spec.object_size && spec.distance.is_finite()) {
+        return invalid("distance", "must exceed twice the object size");
+    }
+    if spec
+        .motion
+        .degrees()
+        .is_some_and(|d| !(0.0..=360.0).contains(&d))
+    {
+        return invalid("degrees", "the total turn must be within 0–360°");
+    }
+    if let SceneMotion::Swap { .. } = spec.motion {
+        if spec.shapes.len() < 2 || spec.frames < spec.shapes.len() {
+            return invalid(
+                "motion",
+                "swap needs two or more shapes and a frame for each",
+            );
+        }
+    }
+    if let Some(cam) = &spec.intrinsics {
+        cam.validate()?;
+    }
+    Ok(())
+}
+
+/// The motion of the `i`-th object (`sign` alternates between objects).
+fn object_motion(spec: &SequenceSpec, i: usize, sign: f64) -> Motion {
+    let size = spec.object_size;
+    match spec.motion {
+        SceneMotion::Drift => {
+            // Total drift over the sequence is bounded so that objects stay in view.
+            let step = (0.02 * size).min(0.5 * size / spec.frames as f64);
+            Motion::Drift(Drift {
+                velocity: Vec3::new(-sign * step, 0.4 * step, 0.6 * step),
+                angular_velocity: Vec3::new(0.3 * sign, 1.0, 0.2).normalize() * 0.06 * sign,
+                wobble: Vec3::new(0.05, 0.08, 0.1) * size,
+                wobble_period: 24.0 + 6.0 * i as f64,
+            })
+        }
+        SceneMotion::Turn { degrees } | SceneMotion::Swap { degrees } => {
+            Motion::turn(sign * degrees.to_radians(), spec.frames)
+        }
+        SceneMotion::Orbit { .. } => Motion::Still,
+        SceneMotion::PickPlace => Motion::PickPlace {
+            frames: spec.frames,
+            lift: UP * (0.75 * size),
+            shift: Vec3::new(sign * 0.5 * size, 0.0, 0.0),
+            tilt: Vec3::new(0.0, 0.0, 0.35 * sign),
+        },
+    }
+}
+
+/// A unique object name per shape, in order (`sphere`, `sphere_2`, …).
+fn unique_names(shapes: &[String]) -> Vec<String> {
+    let mut used: BTreeMap<String, usize> = BTreeMap::new();
+    shapes
+        .iter()
+        .map(|shape| {
+            let base = object_name(shape);
+            let count = used.entry(base.clone()).or_insert(0);
+            *count += 1;
+            if *count == 1 {
+                base
+            } else {
+                format!("{base}_{count}")
+            }
+        })
+        .collect()
+}
+
+/// The scene objects of `spec`, in order: named uniquely, labelled 1, 2, …
+/// (all 1 when swapped), placed side by side at `spec.distance` (all at the
+/// centre when swapped) and moved as `spec.motion` says.
 ///
 /// # Errors
 /// [`SequenceError`] for bad parameters or unusable shapes.
 pub fn build_objects(spec: &SequenceSpec) -> Result<Vec<SceneObject>, SequenceError> {
-    let invalid = |name, reason: &str| SequenceError::InvalidParameter {
-        name,
-        reason: reason.to_string(),
-    };
-    if spec.shapes.is_empty() {
-        return Err(invalid("shapes", "at least one shape is needed"));
-    }
-    if spec.shapes.len() > 64 {
-        return Err(invalid("shapes", "at most 64 objects"));
-    }
-    if spec.frames == 0 {
-        return Err(invalid("frames", "must be at least 1"));
-    }
-    if spec.points_per_object == 0 || spec.points_per_object > 2_000_000 {
-        return Err(invalid("points", "must be in 1..=2000000"));
-    }
-    if !(spec.rate_hz > 0.0 && spec.rate_hz.is_finite() && spec.rate_hz <= 1e6) {
-        return Err(invalid("rate", "must be positive and finite (≤ 1 MHz)"));
-    }
-    if !(spec.object_size > 0.0 && spec.object_size.is_finite()) {
-        return Err(invalid("object_size", "must be positive and finite"));
-    }
-    if !(spec.distance > 2.0 * spec.object_size && spec.distance.is_finite()) {
-        return Err(invalid("distance", "must exceed twice the object size"));
-    }
+    validate(spec)?;
     let n = spec.shapes.len();
+    let swap = matches!(spec.motion, SceneMotion::Swap { .. });
     let spacing = 1.5 * spec.object_size;
-    // Total drift over the sequence is bounded so that objects stay in view.
-    let step = (0.02 * spec.object_size).min(0.5 * spec.object_size / spec.frames as f64);
-    let mut used: BTreeMap<String, usize> = BTreeMap::new();
     let mut objects = Vec::with_capacity(n);
-    for (i, shape) in spec.shapes.iter().enumerate() {
-        let base = object_name(shape);
-        let count = used.entry(base.clone()).or_insert(0);
-        *count += 1;
-        let name = if *count == 1 {
-            base
-        } else {
-            format!("{base}_{count}")
-        };
+    for (i, (shape, name)) in spec
+        .shapes
+        .iter()
+        .zip(unique_names(&spec.shapes))
+        .enumerate()
+    {
         let mesh = centred_scaled(&shape_mesh(shape, spec.mesh_resolution)?, spec.object_size)?;
-        let x = (i as f64 - (n as f64 - 1.0) / 2.0) * spacing;
+        let x = if swap {
+            0.0
+        } else {
+            (i as f64 - (n as f64 - 1.0) / 2.0) * spacing
+        };
         let sign = if i % 2 == 0 { 1.0 } else { -1.0 };
         let tilt = UnitQuaternion::from_scaled_axis(Vec3::new(0.3, 0.2 * sign, 0.1));
-        let axis = Vec3::new(0.3 * sign, 1.0, 0.2).normalize();
         objects.push(SceneObject {
             name,
             mesh,
             start: Isometry3::from_parts(Translation3::new(x, 0.0, spec.distance), tilt),
-            motion: Motion {
-                velocity: Vec3::new(-sign * step, 0.4 * step, 0.6 * step),
-                angular_velocity: axis * 0.06 * sign,
-                wobble: Vec3::new(0.05, 0.08, 0.1) * spec.object_size,
-                wobble_period: 24.0 + 6.0 * i as f64,
-            },
-            label: i as u32 + 1,
+            motion: object_motion(spec, i, sign),
+            label: if swap { 1 } else { i as u32 + 1 },
             colour: PALETTE[i % PALETTE.len()],
+            present: swap.then(|| i * spec.frames / n..(i + 1) * spec.frames / n),
         });
     }
     Ok(objects)
 }
 
-/// A scene of `objects` with the camera focal chosen so that the scene shows
-/// about `target` points at frame 0, keeping the Kinect field of view.
+/// A scene of `objects` with the camera of `spec`: its fixed intrinsics, or
+/// the focal length chosen so that the scene shows about `target` points at
+/// frame 0, keeping the Kinect field of view.
 fn scene_for(
     objects: Vec<SceneObject>,
     spec: &SequenceSpec,
@@ -312,14 +454,26 @@ fn scene_for(
     seed: u64,
     target: usize,
 ) -> Result<Scene, SequenceError> {
+    let camera_path = match spec.motion {
+        SceneMotion::Orbit { degrees } => CameraPath::orbit(
+            Vec3::new(0.0, 0.0, spec.distance),
+            degrees.to_radians(),
+            spec.frames,
+        ),
+        _ => CameraPath::Fixed,
+    };
     let mut scene = Scene {
-        camera: Camera::kinect(),
+        camera: spec.intrinsics.unwrap_or_else(Camera::kinect),
+        camera_path,
         noise: spec.noise,
         objects,
         colour: spec.colour,
         labels,
         seed,
     };
+    if spec.intrinsics.is_some() {
+        return Ok(scene);
+    }
     let mut f = focal_for_points(&scene, target)?;
     // `focal_for_points` probes without the incidence cut-off; one more
     // probe with it (still noise-free) corrects for the grazing pixels lost.
@@ -328,6 +482,7 @@ fn scene_for(
         sigma_const: 0.0,
         sigma_quadratic: 0.0,
         outlier_fraction: 0.0,
+        flying: None,
         ..spec.noise
     };
     probe.camera = kinect_fov(f)?;
@@ -357,9 +512,9 @@ fn kinect_fov(f: f64) -> Result<Camera, SequenceError> {
     Ok(Camera::with_resolution(w, h, f))
 }
 
-/// The streams of `spec`: one per object for [`Layout::SeparateTopics`]
-/// (each object rendered alone, its own noise seed), or one labelled stream
-/// of all objects.
+/// The streams of `spec`: one per label for [`Layout::SeparateTopics`]
+/// (each object, or each run of swapped objects, rendered alone with its own
+/// noise seed), or one labelled stream of all objects.
 ///
 /// # Errors
 /// [`SequenceError`] for bad parameters, shapes, or when an object is not visible.
@@ -375,19 +530,26 @@ pub fn build_streams(spec: &SequenceSpec) -> Result<Vec<Stream>, SequenceError> 
                 scene: scene_for(objects, spec, true, spec.seed, target)?,
             }])
         }
-        Layout::SeparateTopics => objects
-            .into_iter()
-            .enumerate()
-            .map(|(i, o)| {
-                let topic = format!("/synth/{}/points", o.name);
-                let seed = spec.seed ^ (i as u64).wrapping_mul(0xD1B5_4A32_D192_ED03);
-                Ok(Stream {
-                    topic,
-                    labelled: false,
-                    scene: scene_for(vec![o], spec, false, seed, spec.points_per_object)?,
+        Layout::SeparateTopics => {
+            let mut groups: BTreeMap<u32, Vec<SceneObject>> = BTreeMap::new();
+            for o in objects {
+                groups.entry(o.label).or_default().push(o);
+            }
+            groups
+                .into_values()
+                .enumerate()
+                .map(|(i, group)| {
+                    let names: Vec<&str> = group.iter().map(|o| o.name.as_str()).collect();
+                    let topic = format!("/synth/{}/points", names.join("_then_"));
+                    let seed = spec.seed ^ (i as u64).wrapping_mul(0xD1B5_4A32_D192_ED03);
+                    Ok(Stream {
+                        topic,
+                        labelled: false,
+                        scene: scene_for(group, spec, false, seed, spec.points_per_object)?,
+                    })
                 })
-            })
-            .collect(),
+                .collect()
+        }
     }
 }
 
@@ -468,7 +630,9 @@ pub fn write_sequence(
         .map_err(bag_err)?;
     let period_ns = (1e9 / spec.rate_hz).round() as i64;
     let mut renderer = Renderer::new();
-    let (mut visible, mut outliers) = (0usize, 0usize);
+    let (mut visible, mut outliers, mut records) = (0usize, 0usize, 0usize);
+    // (stream id, mesh id) pairs whose mesh has been sent.
+    let mut sent: BTreeSet<(String, String)> = BTreeSet::new();
     for k in 0..spec.frames {
         let t = START_NS + k as i64 * period_ns;
         let header = Header {
@@ -480,36 +644,17 @@ pub fn write_sequence(
             outliers += frame.outliers;
             let cloud = encode_pointcloud2(&frame.cloud, header.clone());
             w.write(&s.topic, t as u64, &cloud).map_err(bag_err)?;
-            for (truth, obj) in frame.truth.iter().zip(&s.scene.objects) {
+            for truth in &frame.truth {
                 visible += truth.visible_points;
-                let (vertices, triangles) = if k == 0 {
-                    (
-                        obj.mesh
-                            .vertices
-                            .iter()
-                            .map(|v| Point {
-                                x: v.x,
-                                y: v.y,
-                                z: v.z,
-                            })
-                            .collect(),
-                        obj.mesh
-                            .triangles
-                            .iter()
-                            .map(|&t| MeshTriangle { vertex_indices: t })
-                            .collect(),
-                    )
-                } else {
-                    (Vec::new(), Vec::new())
-                };
+                records += 1;
+                let stream_id = s.stream_id(truth.label);
+                let first = sent.insert((stream_id.clone(), truth.name.clone()));
+                let mesh = first.then_some(&s.scene.objects[truth.object].mesh);
                 let gt = GroundTruth {
                     header: header.clone(),
-                    stream_id: s.stream_id(truth.label),
-                    mesh_id: truth.name.clone(),
-                    pose: pose_to_msg(&truth.pose),
-                    visible_points: u32::try_from(truth.visible_points).unwrap_or(u32::MAX),
-                    vertices,
-                    triangles,
+                    stream_id,
+                    world_frame_id: spec.world_frame_id.clone(),
+                    ..ground_truth_msg(&s.scene.camera, &frame, truth, mesh)
                 };
                 w.write(GROUND_TRUTH_TOPIC, t as u64, &gt)
                     .map_err(bag_err)?;
@@ -518,7 +663,6 @@ pub fn write_sequence(
         progress(k);
     }
     let summary = w.finish().map_err(bag_err)?;
-    let n_objects: usize = streams.iter().map(|s| s.scene.objects.len()).sum();
     Ok(SequenceSummary {
         mcap_path: summary.mcap_path,
         counts: summary.counts,
@@ -531,9 +675,53 @@ pub fn write_sequence(
                     .map(|o| (s.stream_id(o.label), o.name.clone()))
             })
             .collect(),
-        mean_points_per_object: visible as f64 / (n_objects * spec.frames) as f64,
+        mean_points_per_object: visible as f64 / records.max(1) as f64,
         outliers,
     })
+}
+
+/// The GroundTruth message of `truth` in `frame` (poses, intrinsics, counts),
+/// with `mesh` when given; header, stream and world frame left default.
+fn ground_truth_msg(
+    camera: &Camera,
+    frame: &super::Frame,
+    truth: &super::ObjectTruth,
+    mesh: Option<&TriMesh>,
+) -> GroundTruth {
+    let (vertices, triangles) = mesh.map_or_else(
+        || (Vec::new(), Vec::new()),
+        |m| {
+            (
+                m.vertices
+                    .iter()
+                    .map(|v| Point {
+                        x: v.x,
+                        y: v.y,
+                        z: v.z,
+                    })
+                    .collect(),
+                m.triangles
+                    .iter()
+                    .map(|&t| MeshTriangle { vertex_indices: t })
+                    .collect(),
+            )
+        },
+    );
+    GroundTruth {
+        mesh_id: truth.name.clone(),
+        pose: pose_to_msg(&truth.pose),
+        camera_pose: pose_to_msg(&frame.camera_pose),
+        width: u32::try_from(camera.width).unwrap_or(u32::MAX),
+        height: u32::try_from(camera.height).unwrap_or(u32::MAX),
+        fx: camera.fx,
+        fy: camera.fy,
+        cx: camera.cx,
+        cy: camera.cy,
+        visible_points: u32::try_from(truth.visible_points).unwrap_or(u32::MAX),
+        vertices,
+        triangles,
+        ..GroundTruth::default()
+    }
 }
 
 #[cfg(test)]

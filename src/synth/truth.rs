@@ -3,17 +3,20 @@
 //! (`topic` or `topic#label`, the [`StreamKey`](crate::stream::StreamKey)
 //! display string) and stamp, so that every replayed frame can be scored.
 //!
-//! A stream's first message carries the mesh in the object frame; every
-//! message carries the object's pose in the cloud's frame at that stamp. The
-//! posed ground-truth surface of a frame is the mesh transformed by that
-//! frame's pose; it is the full closed surface, including the side the
-//! camera does not see.
+//! The first message of each mesh id on a stream carries the mesh in the
+//! object frame (a stream's mesh id changes when its object is swapped for
+//! another); every message carries the object's pose in the cloud's frame,
+//! the camera's pose in the world frame and the camera's intrinsics at that
+//! stamp. The posed ground-truth surface of a frame is that frame's mesh
+//! transformed by that frame's pose; it is the full closed surface,
+//! including the side the camera does not see.
 
 use std::collections::BTreeMap;
 
 use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion};
 use thiserror::Error;
 
+use super::Camera;
 use crate::bag::{Bag, BagError};
 use crate::cloud::Vec3;
 use crate::mesh::TriMesh;
@@ -34,11 +37,13 @@ pub enum TruthError {
         /// Cause.
         source: WireError,
     },
-    /// A stream's first message carries no mesh.
-    #[error("stream `{stream}`: first ground-truth message (stamp {stamp_ns} ns) has no mesh")]
+    /// The first message of a mesh id on a stream carries no mesh.
+    #[error("stream `{stream}`: first ground-truth message of mesh `{mesh_id}` (stamp {stamp_ns} ns) has no mesh")]
     MissingMesh {
         /// Stream id.
         stream: String,
+        /// Mesh id.
+        mesh_id: String,
         /// Stamp of that message.
         stamp_ns: i64,
     },
@@ -60,6 +65,16 @@ pub enum TruthError {
         /// The pose as received.
         pose: Pose,
     },
+    /// The camera intrinsics are not usable.
+    #[error("stream `{stream}` at {stamp_ns} ns: bad camera intrinsics: {reason}")]
+    BadCamera {
+        /// Stream id.
+        stream: String,
+        /// Stamp.
+        stamp_ns: i64,
+        /// What is wrong.
+        reason: String,
+    },
 }
 
 /// Ground truth of one object in one frame.
@@ -67,26 +82,41 @@ pub enum TruthError {
 pub struct TruthFrame {
     /// Object frame → cloud frame.
     pub pose: Isometry3<f64>,
-    /// Points of the frame on the object (before outliers).
+    /// Cloud (camera optical) frame → world frame.
+    pub camera_pose: Isometry3<f64>,
+    /// The camera's intrinsics (depth range: the [`Camera::kinect`] defaults).
+    pub camera: Camera,
+    /// Index of the frame's mesh in [`TruthTrack::meshes`].
+    pub mesh: usize,
+    /// Points of the frame on the object (before flying pixels and outliers).
     pub visible_points: u32,
 }
 
 /// Ground truth of one stream.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TruthTrack {
-    /// Mesh identifier (object name).
+    /// Mesh identifier (object name) of the stream's first frame.
     pub mesh_id: String,
-    /// The mesh in the object frame.
+    /// The mesh of the stream's first frame, in the object frame.
     pub mesh: TriMesh,
+    /// Every mesh seen on the stream, in order of appearance, with its id
+    /// (the first is `mesh_id`, `mesh`).
+    pub meshes: Vec<(String, TriMesh)>,
     /// Per stamp (ns since the epoch).
     pub frames: BTreeMap<i64, TruthFrame>,
 }
 
 impl TruthTrack {
-    /// The ground-truth surface at `stamp_ns` (mesh moved by that frame's pose).
+    /// The mesh id and mesh (object frame) of the frame at `stamp_ns`.
+    pub fn mesh_at(&self, stamp_ns: i64) -> Option<(&str, &TriMesh)> {
+        let f = self.frames.get(&stamp_ns)?;
+        self.meshes.get(f.mesh).map(|(id, m)| (id.as_str(), m))
+    }
+
+    /// The ground-truth surface at `stamp_ns` (that frame's mesh moved by its pose).
     pub fn posed_mesh(&self, stamp_ns: i64) -> Option<TriMesh> {
         let f = self.frames.get(&stamp_ns)?;
-        let mut m = self.mesh.clone();
+        let mut m = self.mesh_at(stamp_ns)?.1.clone();
         for v in &mut m.vertices {
             *v = (f.pose * Point3::from(*v)).coords;
         }
@@ -150,27 +180,42 @@ impl GroundTruthIndex {
         let mut streams: BTreeMap<String, TruthTrack> = BTreeMap::new();
         for gt in msgs {
             let stamp = gt.header.stamp.to_nanos();
-            let pose = pose_from_msg(&gt.pose).ok_or_else(|| TruthError::BadPose {
+            let bad_pose = |pose: &Pose| TruthError::BadPose {
                 stream: gt.stream_id.clone(),
                 stamp_ns: stamp,
-                pose: gt.pose,
-            })?;
-            if !streams.contains_key(&gt.stream_id) {
-                let mesh = mesh_from_msg(&gt)?;
-                streams.insert(
-                    gt.stream_id.clone(),
-                    TruthTrack {
-                        mesh_id: gt.mesh_id.clone(),
-                        mesh,
-                        frames: BTreeMap::new(),
-                    },
-                );
-            }
+                pose: *pose,
+            };
+            let pose = pose_from_msg(&gt.pose).ok_or_else(|| bad_pose(&gt.pose))?;
+            let camera_pose =
+                pose_from_msg(&gt.camera_pose).ok_or_else(|| bad_pose(&gt.camera_pose))?;
+            let camera = camera_from_msg(&gt)?;
+            let known = streams
+                .get(&gt.stream_id)
+                .and_then(|t| t.meshes.iter().position(|(id, _)| *id == gt.mesh_id));
+            let mesh = match known {
+                Some(i) => i,
+                None => {
+                    let m = mesh_from_msg(&gt)?;
+                    let track = streams
+                        .entry(gt.stream_id.clone())
+                        .or_insert_with(|| TruthTrack {
+                            mesh_id: gt.mesh_id.clone(),
+                            mesh: m.clone(),
+                            meshes: Vec::new(),
+                            frames: BTreeMap::new(),
+                        });
+                    track.meshes.push((gt.mesh_id.clone(), m));
+                    track.meshes.len() - 1
+                }
+            };
             if let Some(track) = streams.get_mut(&gt.stream_id) {
                 track.frames.insert(
                     stamp,
                     TruthFrame {
                         pose,
+                        camera_pose,
+                        camera,
+                        mesh,
                         visible_points: gt.visible_points,
                     },
                 );
@@ -195,6 +240,24 @@ impl GroundTruthIndex {
     }
 }
 
+fn camera_from_msg(gt: &GroundTruth) -> Result<Camera, TruthError> {
+    let camera = Camera {
+        width: gt.width as usize,
+        height: gt.height as usize,
+        fx: gt.fx,
+        fy: gt.fy,
+        cx: gt.cx,
+        cy: gt.cy,
+        ..Camera::kinect()
+    };
+    camera.validate().map_err(|e| TruthError::BadCamera {
+        stream: gt.stream_id.clone(),
+        stamp_ns: gt.header.stamp.to_nanos(),
+        reason: e.to_string(),
+    })?;
+    Ok(camera)
+}
+
 fn mesh_from_msg(gt: &GroundTruth) -> Result<TriMesh, TruthError> {
     let bad = |reason: String| TruthError::BadMesh {
         stream: gt.stream_id.clone(),
@@ -203,6 +266,7 @@ fn mesh_from_msg(gt: &GroundTruth) -> Result<TriMesh, TruthError> {
     if gt.vertices.is_empty() || gt.triangles.is_empty() {
         return Err(TruthError::MissingMesh {
             stream: gt.stream_id.clone(),
+            mesh_id: gt.mesh_id.clone(),
             stamp_ns: gt.header.stamp.to_nanos(),
         });
     }
@@ -260,6 +324,14 @@ mod tests {
             stream_id: stream.into(),
             mesh_id: "tet".into(),
             pose,
+            world_frame_id: "world".into(),
+            camera_pose: shifted(0.0),
+            width: 64,
+            height: 48,
+            fx: 50.0,
+            fy: 50.0,
+            cx: 32.0,
+            cy: 24.0,
             visible_points: 10,
             vertices,
             triangles,
@@ -284,6 +356,34 @@ mod tests {
         assert_eq!(idx.posed_mesh("/a", 2).unwrap().vertices[3].z, 3.0);
         assert!(idx.posed_mesh("/a", 3).is_none());
         assert!(idx.posed_mesh("/b", 1).is_none());
+        assert_eq!(idx.frame("/a", 2).unwrap().camera.fx, 50.0);
+    }
+
+    #[test]
+    fn a_swapped_mesh_is_indexed_from_its_first_message() {
+        let mut swapped = msg("/a", 3, true, shifted(1.0));
+        swapped.mesh_id = "other".into();
+        swapped.vertices[3].z = 5.0;
+        let mut later = msg("/a", 4, false, shifted(1.0));
+        later.mesh_id = "other".into();
+        let idx = GroundTruthIndex::from_messages([
+            msg("/a", 1, true, shifted(1.0)),
+            msg("/a", 2, false, shifted(1.0)),
+            swapped,
+            later,
+        ])
+        .unwrap();
+        let track = &idx.streams["/a"];
+        assert_eq!(track.mesh_id, "tet");
+        assert_eq!(track.mesh_at(2).unwrap().0, "tet");
+        assert_eq!(track.mesh_at(4).unwrap().0, "other");
+        assert_eq!(idx.posed_mesh("/a", 2).unwrap().vertices[3].z, 2.0);
+        assert_eq!(idx.posed_mesh("/a", 4).unwrap().vertices[3].z, 6.0);
+        // A new mesh id without its mesh is an error naming it.
+        let mut bare = msg("/a", 5, false, shifted(1.0));
+        bare.mesh_id = "third".into();
+        let err = GroundTruthIndex::from_messages([msg("/a", 1, true, shifted(1.0)), bare]);
+        assert!(matches!(err, Err(TruthError::MissingMesh { mesh_id, .. }) if mesh_id == "third"));
     }
 
     #[test]
@@ -297,6 +397,12 @@ mod tests {
         assert!(matches!(
             GroundTruthIndex::from_messages([msg("/a", 1, true, p)]),
             Err(TruthError::BadPose { .. })
+        ));
+        let mut m = msg("/a", 1, true, shifted(1.0));
+        m.fx = 0.0;
+        assert!(matches!(
+            GroundTruthIndex::from_messages([m]),
+            Err(TruthError::BadCamera { .. })
         ));
         let mut m = msg("/a", 1, true, shifted(1.0));
         m.triangles[0].vertex_indices[0] = 9;

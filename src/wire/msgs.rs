@@ -621,7 +621,23 @@ pub struct GroundTruth {
     pub mesh_id: String,
     /// Pose of the mesh frame in `header.frame_id`.
     pub pose: Pose,
-    /// Points of the frame on this object (before outliers).
+    /// Fixed world frame of `camera_pose`.
+    pub world_frame_id: String,
+    /// Pose of `header.frame_id` (the camera) in `world_frame_id`.
+    pub camera_pose: Pose,
+    /// Image width (pixels).
+    pub width: u32,
+    /// Image height (pixels).
+    pub height: u32,
+    /// Focal length along x (pixels).
+    pub fx: f64,
+    /// Focal length along y (pixels).
+    pub fy: f64,
+    /// Principal point x (pixels).
+    pub cx: f64,
+    /// Principal point y (pixels).
+    pub cy: f64,
+    /// Points of the frame on this object (before flying pixels and outliers).
     pub visible_points: u32,
     /// Mesh vertices in the mesh frame (first frame of a stream only).
     pub vertices: Vec<Point>,
@@ -632,7 +648,7 @@ pub struct GroundTruth {
 ros_message!(
     GroundTruth,
     "sepmem_msgs/msg/GroundTruth",
-    "RIHS01_f14a8767c3383d4687c3d94bf348a31a468c814d74d50dca55b9e232749d0244"
+    "RIHS01_8cb0540f8bd243f3a70299627cf22ec4ce7f64c6bf29f31d6257458d4f7248dd"
 );
 ros_message!(
     SurfaceMesh,

@@ -1,0 +1,397 @@
+//! How well a reconstruction matches what a depth camera could know of the
+//! true object (issue 20, deliver 6), as pure functions of meshes, poses and
+//! intrinsics:
+//!
+//! - [`seen_side_accuracy`]: the share of the camera's rays that hit the true
+//!   object and whose first hit on the reconstructed mesh lies within τ of
+//!   the true depth (the visible side, where the data are);
+//! - [`volume_iou`]: the volume intersection over union of two closed meshes,
+//!   by inside tests at the centres of a regular grid (the closure of the
+//!   unseen side);
+//! - [`pose_error`]: the rotation angle and translation between two poses
+//!   (tracking drift);
+//! - [`Coverage`]: the share of the object's surface seen so far over a
+//!   sequence of views, on area-uniform surface samples.
+//!
+//! All ray queries use the first-hit caster of [`super::raycast`].
+
+use nalgebra::{Isometry3, Point3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+
+use super::raycast::{MeshCaster, RaycastError};
+use super::render::pixel_rect;
+use super::Camera;
+use crate::cloud::{Aabb, Vec3};
+use crate::mesh::TriMesh;
+
+/// Result of [`seen_side_accuracy`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SeenSide {
+    /// Pixel rays whose first hit is on the true mesh (within the depth range).
+    pub rays: usize,
+    /// Of those, the rays whose first hit on the reconstruction is within τ
+    /// of the true depth.
+    pub within: usize,
+}
+
+impl SeenSide {
+    /// `within / rays`, `None` when the camera does not see the object.
+    pub fn accuracy(&self) -> Option<f64> {
+        (self.rays > 0).then(|| self.within as f64 / self.rays as f64)
+    }
+}
+
+/// Seen-side depth accuracy of `recon` against `truth`, both in the camera's
+/// optical frame: over the pixel rays of `camera` that hit `truth` within the
+/// camera's depth range, the share whose first hit on `recon` has a depth
+/// (camera z) within `tau` of the true one.
+///
+/// # Errors
+/// [`RaycastError`] when either mesh cannot be ray cast.
+pub fn seen_side_accuracy(
+    camera: &Camera,
+    truth: &TriMesh,
+    recon: &TriMesh,
+    tau: f64,
+) -> Result<SeenSide, RaycastError> {
+    let t = MeshCaster::new(truth)?;
+    let r = MeshCaster::new(recon)?;
+    let Some((i0, i1, j0, j1)) = pixel_rect(camera, &Isometry3::identity(), &truth.aabb()) else {
+        return Ok(SeenSide { rays: 0, within: 0 });
+    };
+    let origin = Vec3::zeros();
+    let counts = (j0..=j1)
+        .into_par_iter()
+        .map(|j| {
+            let mut c = (0usize, 0usize);
+            for i in i0..=i1 {
+                let d = camera.pixel_ray(i, j);
+                let Some(h) = t.first_hit(&origin, &d, camera.max_depth) else {
+                    continue;
+                };
+                if h.t < camera.min_depth {
+                    continue;
+                }
+                c.0 += 1;
+                let near = r.first_hit(&origin, &d, h.t + tau);
+                if near.is_some_and(|g| (g.t - h.t).abs() <= tau) {
+                    c.1 += 1;
+                }
+            }
+            c
+        })
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    Ok(SeenSide {
+        rays: counts.0,
+        within: counts.1,
+    })
+}
+
+/// Result of [`volume_iou`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VolumeIou {
+    /// Volume inside `a` (m³, grid estimate).
+    pub volume_a: f64,
+    /// Volume inside `b`.
+    pub volume_b: f64,
+    /// Volume inside both.
+    pub intersection: f64,
+}
+
+impl VolumeIou {
+    /// Intersection over union, `None` when both are empty.
+    pub fn iou(&self) -> Option<f64> {
+        let union = self.volume_a + self.volume_b - self.intersection;
+        (union > 0.0).then(|| self.intersection / union)
+    }
+}
+
+/// Volume IoU of the closed meshes `a` and `b` (same frame), by inside tests
+/// at the cell centres of a grid over their joint bounding box with `cells`
+/// cells along its longest edge (the error falls as 1/`cells`).
+///
+/// # Errors
+/// [`RaycastError`] when either mesh cannot be ray cast, or `cells` is 0 or
+/// above 1000.
+pub fn volume_iou(a: &TriMesh, b: &TriMesh, cells: usize) -> Result<VolumeIou, RaycastError> {
+    if cells == 0 || cells > 1000 {
+        return Err(RaycastError::BadMesh(format!(
+            "grid of {cells} cells: need 1..=1000"
+        )));
+    }
+    let (ca, cb) = (MeshCaster::new(a)?, MeshCaster::new(b)?);
+    let mut bb: Aabb = a.aabb();
+    b.vertices.iter().for_each(|v| bb.grow(v));
+    let h = bb.longest_edge() / cells as f64;
+    if !(h > 0.0 && h.is_finite()) {
+        return Err(RaycastError::BadMesh("meshes without extent".into()));
+    }
+    let n = bb.extent().map(|e| ((e / h).ceil() as usize).max(1));
+    let counts = (0..n.z)
+        .into_par_iter()
+        .map(|k| {
+            let mut c = [0usize; 3];
+            for j in 0..n.y {
+                for i in 0..n.x {
+                    let p = bb.min + Vec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5) * h;
+                    let (ia, ib) = (ca.contains(&p), cb.contains(&p));
+                    c[0] += usize::from(ia);
+                    c[1] += usize::from(ib);
+                    c[2] += usize::from(ia && ib);
+                }
+            }
+            c
+        })
+        .reduce(|| [0; 3], |x, y| [x[0] + y[0], x[1] + y[1], x[2] + y[2]]);
+    let cell = h * h * h;
+    Ok(VolumeIou {
+        volume_a: counts[0] as f64 * cell,
+        volume_b: counts[1] as f64 * cell,
+        intersection: counts[2] as f64 * cell,
+    })
+}
+
+/// Rotation and translation between an estimated and a true pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseError {
+    /// Angle of `R_est⁻¹ · R_true` (rad, in `[0, π]`).
+    pub rotation_rad: f64,
+    /// `|t_est − t_true|` (m).
+    pub translation_m: f64,
+}
+
+/// The error of `estimate` against `truth` (both object frame → same frame).
+pub fn pose_error(estimate: &Isometry3<f64>, truth: &Isometry3<f64>) -> PoseError {
+    PoseError {
+        rotation_rad: estimate.rotation.angle_to(&truth.rotation),
+        translation_m: (estimate.translation.vector - truth.translation.vector).norm(),
+    }
+}
+
+/// The share of an object's surface seen so far: area-uniform samples of
+/// the mesh (object frame), each marked once a view sees it (in the image,
+/// within the depth range, not beyond `max_incidence_deg`, and the first
+/// surface along its pixel ray).
+#[derive(Debug, Clone)]
+pub struct Coverage {
+    caster: MeshCaster,
+    samples: Vec<(Vec3, Vec3)>,
+    seen: Vec<bool>,
+    cos_min: f64,
+}
+
+impl Coverage {
+    /// `samples` area-uniform points of `mesh` (deterministic for `seed`).
+    ///
+    /// # Errors
+    /// [`RaycastError`] when the mesh cannot be ray cast or has no area.
+    pub fn new(
+        mesh: &TriMesh,
+        samples: usize,
+        max_incidence_deg: f64,
+        seed: u64,
+    ) -> Result<Self, RaycastError> {
+        let caster = MeshCaster::new(mesh)?;
+        let mut cumulative = Vec::with_capacity(mesh.triangles.len());
+        let mut total = 0.0;
+        for t in 0..mesh.triangles.len() {
+            let [a, b, c] = mesh.corners(t);
+            total += 0.5 * (b - a).cross(&(c - a)).norm();
+            cumulative.push(total);
+        }
+        if !(total > 0.0 && total.is_finite()) {
+            return Err(RaycastError::BadMesh("no surface area".into()));
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let samples = (0..samples)
+            .map(|_| {
+                let x = rng.random::<f64>() * total;
+                let t = cumulative
+                    .partition_point(|&c| c < x)
+                    .min(cumulative.len() - 1);
+                let [a, b, c] = mesh.corners(t);
+                let (mut u, mut v) = (rng.random::<f64>(), rng.random::<f64>());
+                if u + v > 1.0 {
+                    (u, v) = (1.0 - u, 1.0 - v);
+                }
+                (a + (b - a) * u + (c - a) * v, caster.normal(t as u32))
+            })
+            .collect::<Vec<_>>();
+        Ok(Self {
+            caster,
+            seen: vec![false; samples.len()],
+            samples,
+            cos_min: max_incidence_deg.to_radians().cos().max(1e-9),
+        })
+    }
+
+    /// Mark the samples that `camera` sees with the object at `pose`
+    /// (object frame → optical frame). Returns how many this view saw.
+    pub fn observe(&mut self, camera: &Camera, pose: &Isometry3<f64>) -> usize {
+        let inv = pose.inverse();
+        let eye = inv.translation.vector;
+        let (w, h) = (camera.width as f64, camera.height as f64);
+        let mut n = 0;
+        for ((p, normal), seen) in self.samples.iter().zip(self.seen.iter_mut()) {
+            let q = (pose * Point3::from(*p)).coords;
+            let Some((u, v)) = camera.project(&q) else {
+                continue;
+            };
+            if !(0.0..w).contains(&u) || !(0.0..h).contains(&v) {
+                continue;
+            }
+            if q.z < camera.min_depth || q.z > camera.max_depth {
+                continue;
+            }
+            let dir = p - eye;
+            let cos = (normal.dot(&dir) / dir.norm()).abs();
+            if cos.is_nan() || cos < self.cos_min {
+                continue;
+            }
+            // Unit parameter at the sample: a nearer hit hides it.
+            let first = self.caster.first_hit(&eye, &dir, 1.0 + 1e-9);
+            if first.is_some_and(|f| f.t >= 1.0 - 1e-6) {
+                n += 1;
+                *seen = true;
+            }
+        }
+        n
+    }
+
+    /// Share of the samples seen by any view so far.
+    pub fn share(&self) -> f64 {
+        if self.seen.is_empty() {
+            return 0.0;
+        }
+        self.seen.iter().filter(|&&s| s).count() as f64 / self.seen.len() as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    /// A sphere of radius `r` centred at `c` (cube-lattice tessellation).
+    fn sphere(r: f64, c: Vec3) -> TriMesh {
+        let mut m = crate::shapes::sphere(96).unwrap().mesh;
+        for v in &mut m.vertices {
+            *v = c + *v * (2.0 * r);
+        }
+        m
+    }
+
+    #[test]
+    fn seen_side_of_a_sphere_against_itself_offsets_and_a_shrunk_copy() {
+        let cam = Camera::kinect();
+        let c = Vec3::new(0.0, 0.0, 1.0);
+        let truth = sphere(0.1, c);
+        let exact = seen_side_accuracy(&cam, &truth, &truth, 1e-6).unwrap();
+        // The disc of pixels seen: π (f r / √(d² − r²))².
+        let disc = PI * (525.0 * 0.1 / (1.0f64 - 0.01).sqrt()).powi(2);
+        assert!(
+            (exact.rays as f64 - disc).abs() < 0.02 * disc,
+            "{exact:?} vs {disc}"
+        );
+        assert_eq!(exact.accuracy(), Some(1.0));
+        // A sphere 2 mm smaller: every central ray is 2 mm off, so τ = 1 mm
+        // rejects the rays where the depth gap exceeds it (all of them: the
+        // gap is ≥ 2 mm along every ray) and τ = 3 mm accepts the rays whose
+        // gap is ≤ 3 mm, i.e. those whose ray meets the small sphere at
+        // angles where 0.1·cosθ − √(0.098² − 0.1² sin²θ) ≤ 0.003.
+        let small = sphere(0.098, c);
+        let tight = seen_side_accuracy(&cam, &truth, &small, 0.001).unwrap();
+        assert_eq!(tight.rays, exact.rays);
+        assert_eq!(tight.accuracy(), Some(0.0));
+        let loose = seen_side_accuracy(&cam, &truth, &small, 0.003).unwrap();
+        let a = loose.accuracy().unwrap();
+        // Analytic share (parallel-ray approximation at 1 m): the gap along a
+        // ray at image radius ρ (m on the sphere) is √(R² − ρ²) − √(r² − ρ²);
+        // it is ≤ 3 mm for ρ² ≤ ρ₀² with ρ₀² solved below.
+        let (rr, r2, g) = (0.1f64, 0.098f64, 0.003f64);
+        // √(R² − ρ²) − √(r² − ρ²) = g  ⇒  ρ₀² = R² − ((R² − r² + g²)/(2g))².
+        let rho0_sq = rr * rr - ((rr * rr - r2 * r2 + g * g) / (2.0 * g)).powi(2);
+        let want = rho0_sq / (rr * rr);
+        assert!((a - want).abs() < 0.05, "{a} vs {want}");
+        // Offset by 5 mm along the view axis: no ray within 1 mm.
+        let behind = sphere(0.1, c + Vec3::new(0.0, 0.0, 0.005));
+        assert_eq!(
+            seen_side_accuracy(&cam, &truth, &behind, 0.001)
+                .unwrap()
+                .within,
+            0
+        );
+    }
+
+    #[test]
+    fn volume_iou_of_offset_spheres_matches_the_lens_formula() {
+        let r = 0.1;
+        let d = 0.08;
+        let a = sphere(r, Vec3::zeros());
+        let b = sphere(r, Vec3::new(d, 0.0, 0.0));
+        let v = volume_iou(&a, &b, 80).unwrap();
+        let ball = 4.0 / 3.0 * PI * r * r * r;
+        let lens = PI * (4.0 * r + d) * (2.0 * r - d).powi(2) / 12.0;
+        let want = lens / (2.0 * ball - lens);
+        assert!(
+            (v.volume_a - ball).abs() < 0.02 * ball,
+            "{} vs {ball}",
+            v.volume_a
+        );
+        assert!(
+            (v.iou().unwrap() - want).abs() < 0.02,
+            "{:?} vs {want}",
+            v.iou()
+        );
+        let same = volume_iou(&a, &a, 40).unwrap();
+        assert_eq!(same.iou(), Some(1.0));
+        let apart = volume_iou(&a, &sphere(r, Vec3::new(0.3, 0.0, 0.0)), 40).unwrap();
+        assert_eq!(apart.iou(), Some(0.0));
+        assert!(volume_iou(&a, &b, 0).is_err());
+    }
+
+    #[test]
+    fn pose_error_is_the_relative_angle_and_offset() {
+        let truth = Isometry3::new(Vec3::new(0.1, 0.2, 1.0), Vec3::new(0.0, 0.3, 0.0));
+        let est = Isometry3::new(Vec3::new(0.1, 0.23, 0.96), Vec3::new(0.0, 0.3, 0.1));
+        let e = pose_error(&est, &truth);
+        assert!((e.translation_m - 0.05).abs() < 1e-12);
+        // Rotations about y by 0.3 and about (0, 0.3, 0.1): their relative angle.
+        let rel = est.rotation.inverse() * truth.rotation;
+        assert!((e.rotation_rad - rel.angle()).abs() < 1e-12);
+        let quarter = Isometry3::new(Vec3::zeros(), Vec3::new(0.0, 0.0, PI / 2.0));
+        let e = pose_error(&quarter, &Isometry3::identity());
+        assert!((e.rotation_rad - PI / 2.0).abs() < 1e-12);
+        assert_eq!(e.translation_m, 0.0);
+    }
+
+    #[test]
+    fn coverage_of_a_sphere_is_the_visible_cap_then_both_caps() {
+        // From distance D a sphere of radius r shows the cap of height
+        // r − r²/D: the share (1 − r/D)/2 of its area.
+        let r = 0.1;
+        let mesh = sphere(r, Vec3::zeros());
+        let mut cov = Coverage::new(&mesh, 20_000, 90.0, 3).unwrap();
+        let cam = Camera::kinect();
+        let d = 0.5;
+        let front = Isometry3::translation(0.0, 0.0, d);
+        cov.observe(&cam, &front);
+        let cap = (1.0 - r / d) / 2.0;
+        assert!(
+            (cov.share() - cap).abs() < 0.015,
+            "{} vs {cap}",
+            cov.share()
+        );
+        // The same view again adds nothing; the opposite view adds its own cap.
+        cov.observe(&cam, &front);
+        assert!((cov.share() - cap).abs() < 0.015);
+        let back = Isometry3::from_parts(
+            nalgebra::Translation3::new(0.0, 0.0, d),
+            nalgebra::UnitQuaternion::from_scaled_axis(Vec3::new(0.0, PI, 0.0)),
+        );
+        cov.observe(&cam, &back);
+        assert!((cov.share() - 2.0 * cap).abs() < 0.02, "{}", cov.share());
+    }
+}
