@@ -344,9 +344,9 @@ fn serialized_metadata_is_the_bare_bag_metadata_map_of_rosbag2() {
     assert_eq!(root_keys(&yaml), root_keys(&fixture_yaml));
     // The whole structure, key for key, parsed by PyYAML as rosbag2 parses it.
     if !common::python_tools() {
-        eprintln!(
-            "SKIPPED serialized_metadata (PyYAML check): python3 with mcap not available \
-             (pip install -r tests/python/requirements.txt)"
+        common::skipped(
+            "serialized_metadata (PyYAML check)",
+            "python3 with mcap not available (pip install -r tests/python/requirements.txt)",
         );
         return;
     }

@@ -9,6 +9,8 @@
 //! payload took it to 2.2 GB).
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use sepmem::cloud::{PointCloud, Vec3};
 use sepmem::transport::liveliness::{Durability, Qos, Reliability};
 use sepmem::transport::{free_loopback_port, Participant, RosType, TransportConfig};
@@ -56,7 +58,7 @@ fn sphere_cloud(k: usize) -> Vec<u8> {
 #[test]
 fn a_payload_above_wire_max_bytes_never_grows_the_node() {
     if !std::path::Path::new("/proc/self/status").exists() {
-        eprintln!("SKIPPED a_payload_above_wire_max_bytes_never_grows_the_node: no /proc");
+        common::skipped("a_payload_above_wire_max_bytes_never_grows_the_node", "no /proc");
         return;
     }
     let port = free_loopback_port().unwrap();

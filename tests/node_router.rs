@@ -6,6 +6,8 @@
 //! of its exact input topic, declared at start before any data.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -24,9 +26,9 @@ fn router_config() -> zenoh::Config {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn default_node_connects_to_a_router_on_localhost_7447() {
     if std::net::TcpListener::bind("127.0.0.1:7447").is_err() {
-        eprintln!(
-            "SKIPPED default_node_connects_to_a_router_on_localhost_7447: port 7447 is in use \
-             (another router runs here)"
+        common::skipped(
+            "default_node_connects_to_a_router_on_localhost_7447",
+            "port 7447 is in use (another router runs here)",
         );
         return;
     }

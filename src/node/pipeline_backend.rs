@@ -15,12 +15,12 @@ use super::backend::{
 use super::reasons;
 use super::stats::Level;
 use crate::membrane::{ConfigError, MembraneConfig, StopReason};
+use crate::pipeline::collision::{CollisionConfig, CollisionObjects};
 use crate::pipeline::engine::{decode_sample, DecodedSample, StreamCloud};
 use crate::pipeline::objects::{cap_objects, Entry, ObjectBook, Quality};
 use crate::pipeline::{
     outputs, Deadlines, FrameResult as PipelineResult, Membranes, PipelineConfig, StartPath,
 };
-use crate::pipeline::collision::{CollisionConfig, CollisionObjects};
 use crate::transport::RosType;
 use crate::wire::msgs::{
     CollisionObject, DiagnosticArray, DiagnosticStatus, FrameDiagnostics, Header, KeyValue, Marker,
@@ -188,7 +188,12 @@ impl EngineProcessor {
     /// MoveIt collision objects of the frame's fitted surfaces (ADD or
     /// MOVE), then REMOVE for the objects no longer tracked; an unfitted
     /// surface never reaches the planning scene.
-    fn collision_objects(&mut self, fitted: &[PipelineResult], header: &Header, out: &mut FrameOut) {
+    fn collision_objects(
+        &mut self,
+        fitted: &[PipelineResult],
+        header: &Header,
+        out: &mut FrameOut,
+    ) {
         let Some(co) = self.collision.as_mut() else {
             return;
         };

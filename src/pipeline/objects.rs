@@ -23,13 +23,12 @@
 //!   it was fitted at. The tracker still warm-starts from its newest
 //!   surface, so the object settles again within a few frames.
 
-use super::{FrameResult, PipelineConfig, StartPath, StreamKey, Tracker};
+use super::{FrameResult, StartPath, StreamKey, Tracker};
 use crate::membrane::StopReason;
 use crate::pipeline::engine::StreamCloud;
 use crate::wire::msgs::{ColorRGBA, Marker, SurfaceMesh};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use std::time::{Duration, Instant};
 
 /// `pipeline.objects`: limits on the objects of one stream.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -302,6 +301,7 @@ impl ObjectBook {
 mod tests {
     use super::*;
     use crate::cloud::{PointCloud, Vec3};
+    use crate::pipeline::PipelineConfig;
 
     fn seg(label: i64, n: usize) -> StreamCloud {
         StreamCloud {
@@ -379,6 +379,7 @@ mod tests {
             deadline_ms: 0.0,
             ..PipelineConfig::default()
         };
+        let membranes = crate::pipeline::Membranes::new(&membrane, &free).expect("membranes");
         let cfg = ObjectsConfig::default();
         let key = StreamKey::topic("/q");
         let mut e = ObjectBook::default().checkout(&key);
@@ -388,7 +389,7 @@ mod tests {
         };
         let r1 = e
             .tracker
-            .process(&sphere(2000, Vec3::zeros()), &membrane, &free)
+            .process(&sphere(2000, Vec3::zeros()), &membranes, &free)
             .expect("frame 1");
         assert!(r1.iterations > 0 && r1.reconstruction.report.eta_final > 0.0);
         let q1 = e.verdict(&r1, &cfg);
@@ -412,7 +413,7 @@ mod tests {
         };
         let r2 = e
             .tracker
-            .process(&sphere(2000, Vec3::new(1.0, 0.0, 0.0)), &membrane, &spent)
+            .process(&sphere(2000, Vec3::new(1.0, 0.0, 0.0)), &membranes, &spent)
             .expect("frame 2");
         assert_eq!((r2.path, r2.iterations), (StartPath::Cold, 0));
         let q2 = e.verdict(&r2, &cfg);
