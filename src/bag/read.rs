@@ -164,7 +164,10 @@ fn check_chunks(path: &Path, buf: &[u8]) -> Result<(), BagError> {
                 }
             }
         }
-        match usize::try_from(len).ok().and_then(|l| (pos + 9).checked_add(l)) {
+        match usize::try_from(len)
+            .ok()
+            .and_then(|l| (pos + 9).checked_add(l))
+        {
             Some(next) if next <= buf.len() => pos = next,
             _ => break,
         }
@@ -558,7 +561,9 @@ mod tests {
         }
         let mut lie = full.clone();
         lie[pos + 25..pos + 33].copy_from_slice(&3_467_835_911_653_498_921u64.to_le_bytes());
-        let e = parse_mcap(Path::new("lie.mcap"), &lie).unwrap_err().to_string();
+        let e = parse_mcap(Path::new("lie.mcap"), &lie)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("uncompressed bytes"), "{e}");
         // Not an MCAP at all: no truncation story.
         assert_eq!(mcap_truncation(b"PAR1 something else"), None);
