@@ -34,7 +34,8 @@ pub struct FrameView<'a> {
 }
 
 /// `(frame, F, R_vis, latency)` of one stream's frames.
-type Track = Vec<(f64, Option<(f64, f64)>, f64)>;
+type FramePoint = (f64, Option<(f64, f64)>, f64);
+type Track = Vec<FramePoint>;
 
 /// What `replay --snapshots/--plot` collect while the replay runs.
 #[derive(Debug, Default)]
@@ -119,13 +120,11 @@ impl ReplayPictures {
 
 /// F and R_vis per frame (when scored), then latency per frame.
 fn replay_panels(tracks: &BTreeMap<String, Track>) -> Vec<Panel> {
-    let series = |name: &str,
-                  id: &str,
-                  pick: &dyn Fn(&(f64, Option<(f64, f64)>, f64)) -> Option<f64>,
-                  t: &Track| Series {
-        label: format!("{name} {id}"),
-        points: t.iter().filter_map(|p| pick(p).map(|y| (p.0, y))).collect(),
-    };
+    let series =
+        |name: &str, id: &str, pick: &dyn Fn(&FramePoint) -> Option<f64>, t: &Track| Series {
+            label: format!("{name} {id}"),
+            points: t.iter().filter_map(|p| pick(p).map(|y| (p.0, y))).collect(),
+        };
     let mut quality = Vec::new();
     let mut latency = Vec::new();
     for (id, t) in tracks {
