@@ -58,7 +58,10 @@ fn sphere_cloud(k: usize) -> Vec<u8> {
 #[test]
 fn a_payload_above_wire_max_bytes_never_grows_the_node() {
     if !std::path::Path::new("/proc/self/status").exists() {
-        common::skipped("a_payload_above_wire_max_bytes_never_grows_the_node", "no /proc");
+        common::skipped(
+            "a_payload_above_wire_max_bytes_never_grows_the_node",
+            "no /proc",
+        );
         return;
     }
     let port = free_loopback_port().unwrap();
