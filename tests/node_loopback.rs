@@ -454,8 +454,8 @@ async fn tokens_are_declared_and_withdrawn_on_clean_shutdown() {
     let kinds = |k: EntityKind| mine.iter().filter(|t| t.kind == k).count();
     assert_eq!(kinds(EntityKind::Node), 1);
     assert_eq!(kinds(EntityKind::Subscription), 1);
-    // /diagnostics + markers + mesh + frame diagnostics.
-    assert_eq!(kinds(EntityKind::Publisher), 4);
+    // /diagnostics + markers + mesh + frame diagnostics + /collision_object.
+    assert_eq!(kinds(EntityKind::Publisher), 5);
     let sub = mine
         .iter()
         .find(|t| t.kind == EntityKind::Subscription)
