@@ -113,6 +113,23 @@ impl Config {
     pub fn defaults() -> Result<Self, ConfigError> {
         Self::load(None, &[])
     }
+
+    /// The node's reconstruction backend, built from the sections it needs
+    /// (membrane, pipeline, wire and the collision-object output): the node
+    /// never sees the whole configuration.
+    ///
+    /// # Errors
+    /// [`ConfigError`] naming the first bad membrane key.
+    pub fn pipeline_backend(
+        &self,
+    ) -> Result<crate::node::PipelineBackend, crate::membrane::ConfigError> {
+        Ok(crate::node::PipelineBackend::new(
+            &self.membrane,
+            self.pipeline.clone(),
+            self.wire.clone(),
+        )?
+        .with_collision_objects(self.node.outputs.collision_objects.clone()))
+    }
 }
 
 fn parse_text(text: &str, ext: &str, origin: &str) -> Result<Value, ConfigError> {

@@ -18,7 +18,6 @@ use sepmem::bag::Bag;
 use sepmem::config::Config;
 use sepmem::metrics::{evaluate, MetricsConfig};
 use sepmem::node::loopback::{inbox_lock, LoopbackNode};
-use sepmem::node::PipelineBackend;
 use sepmem::pipeline::engine::Engine;
 use sepmem::synth::truth::GroundTruthIndex;
 use sepmem::transport::liveliness::{Durability, Qos, Reliability};
@@ -75,12 +74,9 @@ async fn play_and_score(bag_file: &str, node_name: &str, min_f: f64) -> BTreeMap
     .unwrap();
     let mut node_cfg = cfg.node.clone();
     node_cfg.topics = cloud_topics.iter().map(|t| t.to_string()).collect();
-    let node = LoopbackNode::start(
-        &node_cfg,
-        Arc::new(PipelineBackend::from_config(&cfg).unwrap()),
-    )
-    .await
-    .unwrap();
+    let node = LoopbackNode::start(&node_cfg, Arc::new(cfg.pipeline_backend().unwrap()))
+        .await
+        .unwrap();
     let (_ms, meshes) = node.collect("/**", &ty::<SurfaceMesh>()).await.unwrap();
     let (_ks, markers) = node.collect("/**", &ty::<MarkerArray>()).await.unwrap();
     assert!(

@@ -19,6 +19,7 @@
 //!   and the Python `rosbags` / `mcap` readers (checked by
 //!   `tests/python/check_bag.py`).
 
+mod bounded;
 mod metadata;
 mod read;
 mod write;

@@ -134,47 +134,6 @@ fn mcap_truncation(buf: &[u8]) -> Option<String> {
     }
 }
 
-/// Largest uncompressed chunk accepted (rosbag2 writes 4 MiB chunks by
-/// default). The mcap crate allocates a chunk's declared uncompressed size
-/// before decompressing: a mutated size of 3.4·10¹⁸ aborted the process
-/// (found by the short fuzz pass).
-const MAX_CHUNK_BYTES: u64 = 1 << 30;
-
-/// Walk the top-level records and reject a chunk (opcode 0x06) that
-/// declares more than [`MAX_CHUNK_BYTES`] uncompressed; the walk stops at a
-/// truncation, which the mcap crate reports. Linear in the record count.
-fn check_chunks(path: &Path, buf: &[u8]) -> Result<(), BagError> {
-    let mut pos = 8usize;
-    while let Some(head) = buf.get(pos..pos + 9) {
-        let mut len = [0u8; 8];
-        len.copy_from_slice(&head[1..]);
-        let len = u64::from_le_bytes(len);
-        if head[0] == 0x06 {
-            if let Some(size) = buf.get(pos + 9 + 16..pos + 9 + 24) {
-                let mut b = [0u8; 8];
-                b.copy_from_slice(size);
-                let size = u64::from_le_bytes(b);
-                if size > MAX_CHUNK_BYTES {
-                    return Err(BagError::Mcap {
-                        path: path.to_path_buf(),
-                        message: format!(
-                            "the chunk at byte {pos} declares {size} uncompressed bytes, more than {MAX_CHUNK_BYTES}"
-                        ),
-                    });
-                }
-            }
-        }
-        match usize::try_from(len)
-            .ok()
-            .and_then(|l| (pos + 9).checked_add(l))
-        {
-            Some(next) if next <= buf.len() => pos = next,
-            _ => break,
-        }
-    }
-    Ok(())
-}
-
 fn mcap_err<'a>(path: &'a Path, buf: &'a [u8]) -> impl Fn(mcap::McapError) -> BagError + 'a {
     move |e| BagError::Mcap {
         path: path.to_path_buf(),
@@ -349,10 +308,9 @@ fn mcap_topics_in(
     buf: &[u8],
     skipped: &mut Vec<String>,
 ) -> Result<Vec<TopicInfo>, BagError> {
-    check_chunks(path, buf)?;
     let mut counts: BTreeMap<u16, u64> = BTreeMap::new();
     let mut channels: BTreeMap<u16, ChannelInfo> = BTreeMap::new();
-    match mcap::Summary::read(buf).map_err(mcap_err(path, buf))? {
+    match super::bounded::summary(buf).map_err(mcap_err(path, buf))? {
         Some(summary) if summary.stats.is_some() => {
             if let Some(stats) = &summary.stats {
                 counts = stats.channel_message_counts.clone();
@@ -362,7 +320,7 @@ fn mcap_topics_in(
             }
         }
         _ => {
-            for m in mcap::MessageStream::new(buf).map_err(mcap_err(path, buf))? {
+            for m in super::bounded::Messages::new(buf) {
                 let m = m.map_err(mcap_err(path, buf))?;
                 *counts.entry(m.channel.id).or_default() += 1;
                 channels
@@ -411,8 +369,7 @@ fn read_mcap_in(
     wanted: &dyn Fn(&str) -> bool,
     out: &mut Vec<BagMessage>,
 ) -> Result<(), BagError> {
-    check_chunks(path, buf)?;
-    for m in mcap::MessageStream::new(buf).map_err(mcap_err(path, buf))? {
+    for m in super::bounded::Messages::new(buf) {
         let m = m.map_err(mcap_err(path, buf))?;
         if m.channel.message_encoding != "cdr" || !wanted(&m.channel.topic) {
             continue;
@@ -564,8 +521,52 @@ mod tests {
         let e = parse_mcap(Path::new("lie.mcap"), &lie)
             .unwrap_err()
             .to_string();
-        assert!(e.contains("uncompressed bytes"), "{e}");
+        assert!(e.contains("lie.mcap"), "{e}");
         // Not an MCAP at all: no truncation story.
         assert_eq!(mcap_truncation(b"PAR1 something else"), None);
+    }
+
+    /// An uncompressed-chunk bag with one message on `/t`.
+    fn plain_chunk_bag() -> Vec<u8> {
+        let mut out = std::io::Cursor::new(Vec::new());
+        let mut w = mcap::WriteOptions::new()
+            .compression(None)
+            .create(&mut out)
+            .unwrap();
+        let schema = w.add_schema("std_msgs/msg/Empty", "ros2msg", b"").unwrap();
+        let ch = w
+            .add_channel(schema, "/t", "cdr", &BTreeMap::new())
+            .unwrap();
+        let header = mcap::records::MessageHeader {
+            channel_id: ch,
+            sequence: 1,
+            log_time: 1,
+            publish_time: 1,
+        };
+        w.write_to_known_channel(&header, &[0, 1, 0, 0, 0, 0, 0, 0])
+            .unwrap();
+        w.finish().unwrap();
+        drop(w);
+        out.into_inner()
+    }
+
+    /// The fuzz pass's abort, rebuilt: a message record inside a chunk that
+    /// declares 3.4·10¹⁸ bytes made the mcap crate's chunk reader reserve
+    /// that much and abort the process. It is a typed error now.
+    #[test]
+    fn a_record_inside_a_chunk_that_lies_about_its_length_is_an_error() {
+        let bag = plain_chunk_bag();
+        let (topics, messages) = parse_mcap(Path::new("ok.mcap"), &bag).unwrap();
+        assert_eq!((topics.len(), messages.len()), (1, 1));
+        let at = bag
+            .windows(9)
+            .position(|w| w[0] == 0x05 && w[1..] == 30u64.to_le_bytes())
+            .expect("the message record");
+        let mut lie = bag.clone();
+        lie[at + 1..at + 9].copy_from_slice(&3_467_835_911_653_498_921u64.to_le_bytes());
+        let e = parse_mcap(Path::new("lie.mcap"), &lie)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("lie.mcap"), "{e}");
     }
 }

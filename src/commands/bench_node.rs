@@ -23,7 +23,7 @@ use sepmem::config::Config;
 use sepmem::metrics::sample_surface;
 use sepmem::node::loopback::LoopbackNode;
 use sepmem::node::runtime::NodeSummary;
-use sepmem::node::{Backend, PipelineBackend};
+use sepmem::node::Backend;
 use sepmem::transport::attachment::now_ns;
 use sepmem::transport::liveliness::Qos;
 use sepmem::transport::RosType;
@@ -162,7 +162,7 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
     for s in 0..args.streams {
         payloads.push(stream_frames(s, args.points, frames_per_stream)?);
     }
-    let backend = Arc::new(PipelineBackend::from_config(&cfg)?);
+    let backend = Arc::new(cfg.pipeline_backend()?);
     let hostile = args.hostile.then(|| Setup {
         max_bytes: cfg.wire.max_bytes,
         limit: backend.max_message_bytes().unwrap_or(cfg.wire.max_bytes),

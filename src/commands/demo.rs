@@ -14,7 +14,6 @@ use sepmem::bag::{Bag, BagWriter, Qos};
 use sepmem::config::Config;
 use sepmem::node::loopback::{inbox_lock, Inbox, LoopbackNode};
 use sepmem::node::player::{self, PlayOptions};
-use sepmem::node::PipelineBackend;
 use sepmem::transport::RosType;
 use sepmem::wire::convert::trimesh_from_surface;
 use sepmem::wire::msgs::{
@@ -85,7 +84,7 @@ pub fn run(out: &Path, cfg: &Config, rate: f64) -> Result<()> {
     topics.dedup();
     let mut node_cfg = cfg.node.clone();
     node_cfg.topics = topics;
-    let backend = Arc::new(PipelineBackend::from_config(cfg)?);
+    let backend = Arc::new(cfg.pipeline_backend()?);
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

@@ -2,7 +2,6 @@
 
 use anyhow::{Context, Result};
 use sepmem::config::Config;
-use sepmem::node::pipeline_backend::PipelineBackend;
 use sepmem::node::player::{self, PlayOptions};
 use sepmem::node::runtime::{self, NodeSummary};
 use sepmem::transport::Participant;
@@ -64,7 +63,7 @@ pub fn print_summary(s: &NodeSummary) {
 /// `sepmem node`.
 pub fn run_node(config: Option<&Path>, sets: &[String]) -> Result<()> {
     let cfg = Config::load(config, sets)?;
-    let backend = Arc::new(PipelineBackend::from_config(&cfg)?);
+    let backend = Arc::new(cfg.pipeline_backend()?);
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

@@ -67,17 +67,6 @@ impl PipelineBackend {
         self.collision = collision;
         self
     }
-
-    /// A backend from the whole configuration.
-    ///
-    /// # Errors
-    /// [`ConfigError`] naming the first bad membrane key.
-    pub fn from_config(cfg: &crate::config::Config) -> Result<Self, ConfigError> {
-        Ok(
-            Self::new(&cfg.membrane, cfg.pipeline.clone(), cfg.wire.clone())?
-                .with_collision_objects(cfg.node.outputs.collision_objects.clone()),
-        )
-    }
 }
 
 struct EngineProcessor {

@@ -372,9 +372,7 @@ mod tests {
     fn an_unfitted_surface_never_replaces_the_last_fitted_mesh() {
         use crate::pipeline::outputs;
         use crate::wire::msgs::{Header, Time};
-        let membrane = crate::config::Config::defaults()
-            .expect("defaults")
-            .membrane;
+        let membrane = crate::membrane::MembraneConfig::default();
         let free = PipelineConfig {
             deadline_ms: 0.0,
             ..PipelineConfig::default()
