@@ -131,6 +131,36 @@ struct Receipts {
     meshes: Vec<(i64, f64, usize, i64, u8)>,
     /// Membrane iterations of each received mesh (receipt ns, iterations).
     iterations: Vec<(i64, u32)>,
+    /// Per mesh topic, the attachment sequence numbers seen: the node
+    /// numbers each publisher's samples from 1, so the gaps are the meshes
+    /// the transport dropped (zenoh drops under congestion, silently).
+    sequences: BTreeMap<String, Sequences>,
+}
+
+/// The sequence numbers received on one topic.
+#[derive(Debug, Clone, Copy, Default)]
+struct Sequences {
+    first: i64,
+    last: i64,
+    received: u64,
+}
+
+impl Sequences {
+    fn see(&mut self, seq: i64) {
+        if self.received == 0 {
+            (self.first, self.last) = (seq, seq);
+        }
+        self.first = self.first.min(seq);
+        self.last = self.last.max(seq);
+        self.received += 1;
+    }
+
+    /// Sequence numbers between the first and the last that never arrived.
+    fn lost(&self) -> u64 {
+        u64::try_from(self.last - self.first + 1)
+            .unwrap_or(0)
+            .saturating_sub(self.received)
+    }
 }
 
 /// What the hostile streams are made from.
@@ -200,6 +230,9 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
                     let msg = wire::decode::<SurfaceMesh>(&s.payload).ok();
                     let quality = msg.as_ref().map_or(u8::MAX, |m| m.quality);
                     if let Ok(mut r) = r2.lock() {
+                        if let Some(Ok(a)) = &s.attachment {
+                            r.sequences.entry(topic.clone()).or_default().see(a.sequence);
+                        }
                         r.meshes.push((s.received_ns, lat, idx, stamp, quality));
                         if let Some(m) = msg {
                             r.iterations.push((s.received_ns, m.iterations));
@@ -289,7 +322,7 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
         }
         let summary = node.stop().await?;
         let seen = diag.as_ref().map(|(_, d)| d.lock().map(|d| d.clone()).unwrap_or_default());
-        let r = receipts.lock().map(|r| Receipts { meshes: r.meshes.clone(), iterations: r.iterations.clone() }).unwrap_or_default();
+        let r = receipts.lock().map(|r| Receipts { meshes: r.meshes.clone(), iterations: r.iterations.clone(), sequences: r.sequences.clone() }).unwrap_or_default();
         let published: Vec<u64> = published.iter().map(|p| p.load(Ordering::Relaxed)).collect();
         let figures = report(args, &cfg, &summary, &r, &published, window, &rss);
         let verdict = seen.map(|d| hostile_verdict(&d, &sent));
@@ -440,7 +473,16 @@ fn report(
         100.0 * (rss_last / rss_ref - 1.0)
     );
     println!("reasons (all streams): {:?}", summary.reasons);
+    let (lost, seen) = r
+        .sequences
+        .values()
+        .fold((0, 0), |(l, n), q| (l + q.lost(), n + q.received));
+    println!(
+        "output meshes lost in transport (sequence gaps, all streams): {lost} of {}",
+        lost + seen
+    );
     serde_json::json!({
+        "meshes_lost_in_transport": lost,
         "streams": args.streams, "rate_hz": args.rate, "points": args.points,
         "duration_s": args.duration, "warmup_s": args.warmup,
         "deadline_ms": cfg.pipeline.deadline_ms,

@@ -94,7 +94,19 @@ struct StreamStats {
     /// What the stream's frames refused or discarded, by reason.
     reasons: BTreeMap<&'static str, u64>,
     reported_over_budget: u64,
+    /// When this stream last logged a failed frame (ns), and the failures
+    /// left unlogged since: a hostile stream fails every frame, and the log
+    /// says so once per [`WARN_EVERY_NS`], not 30 times a second.
+    last_warn_ns: i64,
+    unlogged: u64,
+    /// Output messages handed to zenoh. Each output carries the rmw_zenoh
+    /// attachment's sequence number, so a subscriber counts what the
+    /// transport dropped under load as the gaps (`bench-node` does).
+    published: u64,
 }
+
+/// Least time between two "frame failed" warnings of one stream.
+const WARN_EVERY_NS: i64 = 5_000_000_000;
 
 impl StreamStats {
     fn count(&self, reason: &str) -> u64 {
@@ -462,8 +474,8 @@ async fn stream_task(mut ctx: StreamCtx) -> bool {
                         m.charge(taken.busy, Instant::now());
                     }
                     let outputs = std::mem::take(&mut taken.result.outputs);
-                    let failed = publish_outputs(&pubs, &ctx.topic, outputs).await;
-                    record(&ctx, taken, failed);
+                    let sent = publish_outputs(&pubs, &ctx.topic, outputs).await;
+                    record(&ctx, taken, sent);
                 }
             }
             continue;
@@ -611,28 +623,39 @@ async fn sit_out(ctx: &StreamCtx, debt: Duration) -> bool {
     running
 }
 
-/// Publish a frame's outputs; returns how many could not be.
+/// How many of a frame's outputs were handed to zenoh, and how many could
+/// not be.
+#[derive(Debug, Default, Clone, Copy)]
+struct Sent {
+    published: u64,
+    failed: u64,
+}
+
+/// Publish a frame's outputs.
 async fn publish_outputs(
     pubs: &Publishers,
     topic: &str,
     outputs: Vec<super::backend::Output>,
-) -> u64 {
-    let mut failed = 0;
+) -> Sent {
+    let (mut published, mut failed) = (0, 0);
     for out in outputs {
         let Some(publ) = pubs.get(&out.kind) else {
             failed += 1;
             continue;
         };
-        if let Err(e) = publ.put(out.payload).await {
-            tracing::warn!(%topic, error = %e, "publish failed");
-            failed += 1;
+        match publ.put(out.payload).await {
+            Ok(()) => published += 1,
+            Err(e) => {
+                tracing::warn!(%topic, error = %e, "publish failed");
+                failed += 1;
+            }
         }
     }
-    failed
+    Sent { published, failed }
 }
 
 /// Add one processed frame to the stream's statistics.
-fn record(ctx: &StreamCtx, taken: Taken, outputs_failed: u64) {
+fn record(ctx: &StreamCtx, taken: Taken, sent: Sent) {
     let now = now_ns();
     ctx.stream.slot.touch(now);
     ctx.stream.busy.store(false, Ordering::Release);
@@ -652,12 +675,19 @@ fn record(ctx: &StreamCtx, taken: Taken, outputs_failed: u64) {
     for (reason, n) in result.counts {
         *st.reasons.entry(reason).or_default() += n;
     }
-    if outputs_failed > 0 {
-        *st.reasons.entry(reasons::OUTPUTS_FAILED).or_default() += outputs_failed;
+    st.published += sent.published;
+    if sent.failed > 0 {
+        *st.reasons.entry(reasons::OUTPUTS_FAILED).or_default() += sent.failed;
     }
     st.last_failed = result.error.is_some();
     if let Some(e) = result.error {
-        tracing::warn!(topic = %ctx.topic, error = %e, "frame failed");
+        if now - st.last_warn_ns >= WARN_EVERY_NS {
+            let also = std::mem::take(&mut st.unlogged);
+            tracing::warn!(topic = %ctx.topic, error = %e, unlogged_since = also, "frame failed");
+            st.last_warn_ns = now;
+        } else {
+            st.unlogged += 1;
+        }
         st.errors += 1;
         st.last_error = Some(bounded(e));
     }
@@ -752,6 +782,7 @@ fn stream_values(topic: &str, st: &StreamStats) -> Vec<(String, String)> {
         ("topic".into(), topic.to_string()),
         ("frames".into(), st.frames.to_string()),
         ("drops".into(), st.drops.to_string()),
+        ("published".into(), st.published.to_string()),
         ("errors".into(), st.errors.to_string()),
         ("late".into(), st.late.to_string()),
         ("p50_ms".into(), ms(st.latency.quantile(0.5))),
