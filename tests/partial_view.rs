@@ -70,7 +70,6 @@ fn the_camera_sees_about_half_of_each_object_and_the_visible_side_is_recovered()
 }
 
 #[test]
-#[ignore = "re-baseline: the ray-cast synth (lower Kinect noise, new sampling) gives rounded_box frame 2 volume ratio 1.33, above the bound set on the old renderer"]
 fn the_unseen_side_stays_a_plausible_closure() {
     // Measured at the time of writing (3 frames each): depth ratio
     // 0.89–0.90 / 1.12–1.19 / 1.11–1.19, volume ratio 0.81–0.83 / 1.18–1.26 /
@@ -81,6 +80,10 @@ fn the_unseen_side_stays_a_plausible_closure() {
     // volume 1.22–1.53 (its third frame, a cold restart, is the 1.53): the
     // volume bound is 1.6, still far from a blown-up closure (the end-on
     // bottle below reaches 2–3).
+    // On the ray-cast synth (session 14: true self-occlusion, Nguyen noise)
+    // the backs sit deeper: depth 0.90–0.92 / 1.13–1.18 / 1.18–1.31, volume
+    // 0.85 / 1.21–1.37 / 1.23–1.33, P 0.41–0.51, R_vis 0.95–1.00. The depth
+    // bound is 1.4 since then (it was 1.3).
     // With the mirror completion of the unseen side (membrane.view_completion).
     let frames = replay(
         &["sphere", "ellipsoid", "rounded_box"],
@@ -95,7 +98,7 @@ fn the_unseen_side_stays_a_plausible_closure() {
         assert!(s.recall_visible >= 0.9, "{at}");
         // The back is closed at a plausible depth: neither collapsed onto the
         // visible shell (ratio ≈ 0.5 in depth, ≈ 0 in volume) nor blown up.
-        assert!((0.75..=1.3).contains(&s.depth_ratio), "{at}");
+        assert!((0.75..=1.4).contains(&s.depth_ratio), "{at}");
         assert!((0.6..=1.6).contains(&s.volume_ratio), "{at}");
     }
 }
@@ -109,7 +112,7 @@ fn a_bottle_seen_end_on_stays_a_plausible_closure() {
     for f in &replay(&["bottle"], 3, &["membrane.view_completion=true"]) {
         let s = f.score.unwrap();
         let at = format!("{} frame {}: {s:?}", f.key, f.result.frame);
-        assert!((0.75..=1.3).contains(&s.depth_ratio), "{at}");
+        assert!((0.75..=1.4).contains(&s.depth_ratio), "{at}");
         assert!((0.5..=1.5).contains(&s.volume_ratio), "{at}");
     }
 }
