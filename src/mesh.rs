@@ -44,6 +44,22 @@ impl Topology {
 }
 
 impl TriMesh {
+    /// The closed, outward-oriented tetrahedron on the origin and the three
+    /// unit points: the smallest watertight mesh (a fixture for tests and
+    /// fuzz seeds).
+    pub fn unit_tetrahedron() -> TriMesh {
+        TriMesh {
+            vertices: vec![
+                Vec3::new(0.0, 0.0, 0.0),
+                Vec3::new(1.0, 0.0, 0.0),
+                Vec3::new(0.0, 1.0, 0.0),
+                Vec3::new(0.0, 0.0, 1.0),
+            ],
+            triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+            vertex_scalars: vec![],
+        }
+    }
+
     /// True when the mesh has no triangles.
     pub fn is_empty(&self) -> bool {
         self.triangles.is_empty()
@@ -169,19 +185,9 @@ impl TriMesh {
 pub(crate) mod tests {
     use super::*;
 
-    /// A closed, outward-oriented unit tetrahedron (test fixture, also used by
-    /// other modules' tests).
+    /// The unit tetrahedron (test fixture, also used by other modules' tests).
     pub(crate) fn tetra() -> TriMesh {
-        TriMesh {
-            vertices: vec![
-                Vec3::new(0.0, 0.0, 0.0),
-                Vec3::new(1.0, 0.0, 0.0),
-                Vec3::new(0.0, 1.0, 0.0),
-                Vec3::new(0.0, 0.0, 1.0),
-            ],
-            triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
-            vertex_scalars: vec![],
-        }
+        TriMesh::unit_tetrahedron()
     }
 
     #[test]

@@ -277,14 +277,8 @@ mod seeds {
 
     fn tetra() -> sepmem::mesh::TriMesh {
         sepmem::mesh::TriMesh {
-            vertices: vec![
-                Vec3::new(0.0, 0.0, 0.0),
-                Vec3::new(1.0, 0.0, 0.0),
-                Vec3::new(0.0, 1.0, 0.0),
-                Vec3::new(0.0, 0.0, 1.0),
-            ],
-            triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
             vertex_scalars: vec![("q".into(), vec![0.0, 1.0, 2.0, 3.0])],
+            ..sepmem::mesh::TriMesh::unit_tetrahedron()
         }
     }
 
@@ -296,12 +290,7 @@ mod seeds {
         organised.height = 2;
         organised.width = 2;
         organised.row_step = 2 * organised.point_step;
-        let f = |name: &str, offset, datatype, count| PointField {
-            name: name.into(),
-            offset,
-            datatype,
-            count,
-        };
+        let f = PointField::new;
         let wide = PointCloud2 {
             height: 1,
             width: 2,

@@ -21,12 +21,7 @@ fn header(sec: i32, nanosec: u32, frame: &str) -> Header {
 }
 
 fn pf(name: &str, offset: u32, datatype: u8) -> PointField {
-    PointField {
-        name: name.into(),
-        offset,
-        datatype,
-        count: 1,
-    }
+    PointField::new(name, offset, datatype, 1)
 }
 
 fn pc2_xyzrgb() -> PointCloud2 {

@@ -95,12 +95,7 @@ fn labelled(points: Vec<Vec3>, labels: Vec<f32>) -> Result<Vec<u8>> {
 
 /// The poisoned PointCloud2 of issue 22.
 pub fn poisoned() -> Result<Vec<u8>> {
-    let f = |name: &str, offset, datatype, count| PointField {
-        name: name.into(),
-        offset,
-        datatype,
-        count,
-    };
+    let f = PointField::new;
     let msg = PointCloud2 {
         header: header(),
         height: 0,

@@ -112,6 +112,16 @@ impl PointField {
     pub const FLOAT32: u8 = 7;
     /// `float64`.
     pub const FLOAT64: u8 = 8;
+
+    /// A field of `count` elements of `datatype` at `offset`.
+    pub fn new(name: &str, offset: u32, datatype: u8, count: u32) -> Self {
+        Self {
+            name: name.to_string(),
+            offset,
+            datatype,
+            count,
+        }
+    }
 }
 
 /// sensor_msgs/msg/PointCloud2.

@@ -498,12 +498,7 @@ pub fn encode_pointcloud2(cloud: &PointCloud, header: Header) -> PointCloud2 {
 }
 
 fn field(name: &str, offset: u32, datatype: u8) -> PointField {
-    PointField {
-        name: name.to_string(),
-        offset,
-        datatype,
-        count: 1,
-    }
+    PointField::new(name, offset, datatype, 1)
 }
 
 /// Split a cloud by the integer value of channel `label` (rounded), for
