@@ -714,9 +714,20 @@ fn mcap_contents(path: &Path) -> McapContents {
         .channels
         .values()
         .map(|c| {
-            let schema = c.schema.as_ref().map(|s| s.name.clone()).unwrap_or_default();
-            let hash = c.metadata.get("topic_type_hash").cloned().unwrap_or_default();
-            (c.topic.clone(), (schema, c.message_encoding.clone(), hash, 0))
+            let schema = c
+                .schema
+                .as_ref()
+                .map(|s| s.name.clone())
+                .unwrap_or_default();
+            let hash = c
+                .metadata
+                .get("topic_type_hash")
+                .cloned()
+                .unwrap_or_default();
+            (
+                c.topic.clone(),
+                (schema, c.message_encoding.clone(), hash, 0),
+            )
         })
         .collect();
     let mut log_times: Option<(u64, u64)> = None;
