@@ -750,7 +750,7 @@ fn assert_rosbag2_reads(path: &Path) -> Rosbag2Metadata {
     assert_eq!(m.version, 9, "{what}");
     assert_eq!(m.storage_identifier, "mcap", "{what}");
     let file = path.file_name().unwrap().to_str().unwrap().to_string();
-    assert_eq!(m.relative_file_paths, [file.clone()], "{what}");
+    assert_eq!(m.relative_file_paths, std::slice::from_ref(&file), "{what}");
     let truth = mcap_contents(path);
     let (first, last) = truth.log_times.unwrap_or((0, 0));
     let total: u64 = truth.topics.values().map(|t| t.3).sum();
