@@ -160,3 +160,84 @@ fn the_skip_log_lists_each_skipped_test_with_its_reason_for_the_ci_summary() {
         .unwrap();
     assert!(String::from_utf8_lossy(&none.stdout).contains("0 skipped"));
 }
+
+/// The README's first command, `sepmem demo`, with no router anywhere: the
+/// test holds rmw_zenoh's router port 127.0.0.1:7447 itself (so no router
+/// can sit there) and counts the connections made to it, which must be none
+/// (the demo's node and player talk over their own loopback endpoints).
+#[test]
+fn the_demo_needs_no_router_and_never_dials_one() {
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    use std::sync::Arc;
+    use std::time::{Duration, Instant};
+    let Ok(listener) = std::net::TcpListener::bind("127.0.0.1:7447") else {
+        common::skipped(
+            "the_demo_needs_no_router_and_never_dials_one",
+            "port 7447 is in use (a router may run here)",
+        );
+        return;
+    };
+    listener.set_nonblocking(true).unwrap();
+    let (stop, dialed) = (
+        Arc::new(AtomicBool::new(false)),
+        Arc::new(AtomicUsize::new(0)),
+    );
+    let watcher = {
+        let (stop, dialed) = (stop.clone(), dialed.clone());
+        std::thread::spawn(move || {
+            while !stop.load(Ordering::Relaxed) {
+                match listener.accept() {
+                    Ok(_) => {
+                        dialed.fetch_add(1, Ordering::Relaxed);
+                    }
+                    Err(_) => std::thread::sleep(Duration::from_millis(10)),
+                }
+            }
+        })
+    };
+    let out = tempfile::tempdir().unwrap();
+    let mut demo = Command::new(env!("CARGO_BIN_EXE_sepmem"))
+        .args(["demo", "-o"])
+        .arg(out.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    while demo.try_wait().unwrap().is_none() {
+        if t0.elapsed() > Duration::from_secs(120) {
+            demo.kill().unwrap();
+            panic!("sepmem demo did not finish within 120 s");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let o = demo.wait_with_output().unwrap();
+    stop.store(true, Ordering::Relaxed);
+    watcher.join().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{text}\n{}", stderr(&o));
+    let frames: usize = text
+        .lines()
+        .find_map(|l| l.strip_prefix("demo: "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no demo summary line:\n{text}"));
+    eprintln!(
+        "demo: {frames} object frames in {:.1} s, {} connections to 127.0.0.1:7447",
+        t0.elapsed().as_secs_f64(),
+        dialed.load(Ordering::Relaxed)
+    );
+    assert_eq!(
+        dialed.load(Ordering::Relaxed),
+        0,
+        "the demo dialed the router port"
+    );
+    // Each bundled bag gave meshes (PLY) and an output bag.
+    for bag in ["mosd_rosbags", "synth_ellipsoid", "synth_two_labelled"] {
+        let dir = out.path().join(bag);
+        let meshes = std::fs::read_dir(dir.join("meshes")).map_or(0, |d| d.count());
+        assert!(meshes > 0, "{bag}: no mesh written\n{text}");
+        assert!(dir.join(format!("{bag}_sepmem.mcap")).is_file(), "{bag}");
+    }
+    assert!(frames >= 3, "{text}");
+}

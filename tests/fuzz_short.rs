@@ -363,7 +363,7 @@ mod seeds {
 
     fn mcap() -> Seeds {
         let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("seed.mcap");
+        let path = dir.path().join("bag.mcap");
         let mut w = sepmem::bag::BagWriter::create(&path).unwrap();
         let m = sepmem::wire::pointcloud2::encode_pointcloud2(&cloud(3), Header::default());
         w.write("/cloud", 1, &m).unwrap();

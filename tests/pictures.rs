@@ -212,6 +212,99 @@ fn bench_plots_the_sweep_and_f_per_condition_beside_the_peers() {
         let s = bars.all(*class);
         assert!(s > 2e-3, "conditions.png: series {i} covers only {s:.4}");
     }
+    // Every bar is drawn whole, its height in proportion to its figure: the
+    // peers' from the peers file, sepmem's from bench.json. (A legend drawn
+    // over the chart hid the tops of two bars and added its swatches as
+    // bars of their own.)
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.path().join("bench.json")).unwrap())
+            .unwrap();
+    const CONDITIONS: [&str; 4] = ["original", "noise", "region_outliers", "surface_outliers"];
+    let summaries = report["table1"]["genus0"].as_array().unwrap();
+    let ours: Vec<f64> = CONDITIONS
+        .iter()
+        .map(|c| {
+            let s = summaries.iter().find(|s| s["group"] == *c).unwrap();
+            s["fscore"].as_f64().unwrap()
+        })
+        .collect();
+    let peers: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&peers).unwrap()).unwrap();
+    let figures = |method: &str| -> Vec<f64> {
+        CONDITIONS
+            .iter()
+            .map(|c| peers[method][c].as_f64().unwrap())
+            .collect()
+    };
+    let expected = [
+        ours,
+        figures("Alpha-shape (paper)"),
+        figures("PSR (paper)"),
+        figures("SAP (paper)"),
+    ];
+    // Pixels per unit of F, from the tallest bar of all.
+    let measured: Vec<Vec<usize>> = SERIES.iter().map(|c| bar_heights(&bars, *c)).collect();
+    let (h_max, v_max) = measured
+        .iter()
+        .flatten()
+        .zip(expected.iter().flat_map(|v| v.iter().filter(|f| **f > 0.0)))
+        .fold(
+            (0usize, 0.0f64),
+            |m, (h, v)| if *h > m.0 { (*h, *v) } else { m },
+        );
+    for (i, (heights, values)) in measured.iter().zip(&expected).enumerate() {
+        let drawn: Vec<f64> = values.iter().copied().filter(|v| *v > 0.0).collect();
+        assert_eq!(
+            heights.len(),
+            drawn.len(),
+            "series {i}: bars {heights:?} for {values:?}"
+        );
+        for (h, v) in heights.iter().zip(&drawn) {
+            let want = v * h_max as f64 / v_max;
+            assert!(
+                (*h as f64 - want).abs() <= 2.0,
+                "series {i}: bar of F {v} is {h} px high, expected {want:.1} px"
+            );
+        }
+    }
+}
+
+/// The bars of colour `class` in a bar chart (its left 690 pixels; the
+/// legend column is the right 210), left to right: the height in pixels of
+/// each (the longest vertical run of the colour in the middle column of
+/// each run of columns holding the colour).
+fn bar_heights(pic: &Picture, class: fn([u8; 3]) -> bool) -> Vec<usize> {
+    let chart_w = pic.width - 210;
+    let column = |x: usize| -> usize {
+        let (mut best, mut run) = (0, 0);
+        for y in 0..pic.height {
+            let i = 3 * (y * pic.width + x);
+            run = if class([pic.rgb[i], pic.rgb[i + 1], pic.rgb[i + 2]]) {
+                run + 1
+            } else {
+                0
+            };
+            best = best.max(run);
+        }
+        best
+    };
+    // Runs of at least 3 columns: a bar, not a glyph of the legend text.
+    let mut bars = Vec::new();
+    let mut x = 0;
+    while x < chart_w {
+        if column(x) == 0 {
+            x += 1;
+            continue;
+        }
+        let start = x;
+        while x < chart_w && column(x) > 0 {
+            x += 1;
+        }
+        if x - start >= 3 {
+            bars.push(column((start + x) / 2));
+        }
+    }
+    bars
 }
 
 #[test]
@@ -235,4 +328,23 @@ fn a_peers_file_with_an_unknown_condition_is_a_clear_error() {
             && last.contains("region_outliers"),
         "{err}"
     );
+}
+
+#[test]
+fn the_readme_shows_a_snapshot_that_holds_the_mesh() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    // Markdown images: ![alt](path).
+    let images: Vec<&str> = readme
+        .split("![")
+        .skip(1)
+        .filter_map(|s| s.split_once("](")?.1.split_once(')').map(|(p, _)| p))
+        .collect();
+    assert_eq!(images, ["docs/snapshot.png"], "README images");
+    for (v, share) in snapshot_views(&root.join(images[0])).iter().enumerate() {
+        assert!(
+            *share > 0.05,
+            "README picture view {v}: mesh covers only {share:.4}"
+        );
+    }
 }

@@ -4,7 +4,8 @@
 //! the client's own scripted stream. The client checks the graph tokens with
 //! rmw_zenoh's grammar, every endpoint's type, hash and QoS, the attachment
 //! of every sample (the player's clouds included), frames and stamps, the
-//! TRANSIENT_LOCAL late join (last mesh of every stream within 1 s), and the
+//! TRANSIENT_LOCAL late join (the last mesh of every stream, by its stamp,
+//! within 1 s of opening the late session), and the
 //! collision objects (ADD, MOVE, then REMOVE after eviction). The node is
 //! then stopped with SIGINT and must exit cleanly. Skips visibly when
 //! python3 with `zenoh`, `rosbags` and `numpy` is not available.
@@ -46,6 +47,12 @@ fn start_node(port: u16) -> Child {
             "node.evict_after_ms=6000",
             "--set",
             "node.diagnostics_period_ms=500",
+            // A warm frame cut by the 15 ms deadline is not "fitted" and
+            // sends no collision object: on the loaded 2-core machine that
+            // left the scripted stream at ADD, REMOVE (no MOVE) in 1 of 4
+            // runs. The wire behaviour is under test here, not the budget.
+            "--set",
+            "pipeline.deadline_ms=1000",
         ])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -151,6 +158,17 @@ fn conformance_client_passes_against_node_and_player() {
     // Measured outcomes the client reports (each also a failure if wrong).
     assert!(v["samples_checked"].as_u64().unwrap() >= 30, "{v}");
     assert!(v["headers_checked"].as_u64().unwrap() >= 20, "{v}");
+    // Outputs use zenoh's "drop" congestion control (RELIABLE + KEEP_LAST,
+    // as rmw_zenoh maps it): on a loaded 2-core machine a cold frame's burst
+    // lost the first marker array and collision object in 2 of 4 runs.
+    // Gaps in the sequence numbers are counted; more than 3 is a failure.
+    let lost: u64 = v["samples_lost"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|n| n.as_u64().unwrap())
+        .sum();
+    assert!(lost <= 3, "samples lost: {}", v["samples_lost"]);
     for t in [SCRIPTED, PLAYED] {
         assert!(v["late_join_s"][t].as_f64().unwrap() <= 1.0, "{v}");
     }

@@ -142,7 +142,6 @@ fn replay_panels(tracks: &BTreeMap<String, Track>) -> Vec<Panel> {
             y_label: "F, R_vis".into(),
             y_range: Some((0.0, 1.02)),
             series: quality,
-            legend_top: false,
         });
     }
     panels.push(Panel {
@@ -151,7 +150,6 @@ fn replay_panels(tracks: &BTreeMap<String, Track>) -> Vec<Panel> {
         y_label: "ms".into(),
         y_range: None,
         series: latency,
-        legend_top: true,
     });
     panels
 }
@@ -225,7 +223,6 @@ pub fn bench_plots(
                 label: label.into(),
                 points,
             }],
-            legend_top: true,
         };
         let panels = [
             panel("sphere sweep: F-score", "F", "sepmem", pick(|s| s.fscore)),

@@ -6,9 +6,14 @@
 //! in another. The benchmark plots its sphere sweep (F-score and
 //! Chamfer-L1 against the duplicates' σ, the paper's Fig. 8 experiment) and
 //! the F-score per input condition of Table 1 beside the peers' figures.
+//!
+//! The legend sits in its own column right of the chart, never on the data:
+//! drawn inside the chart, it hid the last sweep point, the last frames of a
+//! replay's F curve and two bars of `conditions.png` (seen in those pictures).
 
 use super::{draw_err, ensure_font, Canvas, VizError, FAMILY};
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::path::Path;
 
 /// One named line: `(x, y)` points in drawing order.
@@ -33,8 +38,6 @@ pub struct Panel {
     pub y_range: Option<(f64, f64)>,
     /// The lines.
     pub series: Vec<Series>,
-    /// Legend in the upper right corner (default: lower right).
-    pub legend_top: bool,
 }
 
 /// Grouped bars: one group per category, one bar per series in each.
@@ -52,6 +55,65 @@ pub struct Bars {
 
 const WIDTH: u32 = 900;
 const PANEL_H: u32 = 320;
+/// Width of the legend column right of each chart.
+const LEGEND_W: u32 = 210;
+/// Legend rows: height, and the top of the first (below the caption).
+const LEGEND_ROW: i32 = 20;
+const LEGEND_TOP: i32 = 40;
+
+/// How a legend entry shows its series.
+#[derive(Clone, Copy)]
+enum Swatch {
+    Line,
+    Bar,
+}
+
+/// Split `area` into the chart (left) and the legend column (right).
+fn with_legend_column<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+) -> (
+    DrawingArea<DB, plotters::coord::Shift>,
+    DrawingArea<DB, plotters::coord::Shift>,
+) {
+    let w = area.dim_in_pixel().0;
+    area.split_horizontally(w.saturating_sub(LEGEND_W))
+}
+
+/// One row per label, top down: the series' colour `colour(i)` as a short
+/// line or a filled square, then the label; the rows that do not fit in
+/// the column's height are counted in a last row instead.
+fn draw_legend<'a, DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    labels: impl ExactSizeIterator<Item = &'a str>,
+    swatch: Swatch,
+    what: &str,
+) -> Result<(), VizError> {
+    let style = TextStyle::from((FAMILY, 14).into_font()).pos(Pos::new(HPos::Left, VPos::Center));
+    let h = area.dim_in_pixel().1 as i32;
+    let fit = ((h - LEGEND_TOP) / LEGEND_ROW).max(1) as usize;
+    let n = labels.len();
+    let shown = if n > fit { fit - 1 } else { n };
+    if shown < n {
+        let y = LEGEND_TOP + LEGEND_ROW * shown as i32;
+        area.draw(&Text::new(
+            format!("+ {} more", n - shown),
+            (30, y),
+            style.clone(),
+        ))
+        .map_err(draw_err(what))?;
+    }
+    for (i, label) in labels.take(shown).enumerate() {
+        let (c, y) = (colour(i), LEGEND_TOP + LEGEND_ROW * i as i32);
+        match swatch {
+            Swatch::Line => area.draw(&PathElement::new(vec![(4, y), (24, y)], c.stroke_width(2))),
+            Swatch::Bar => area.draw(&Rectangle::new([(7, y - 6), (19, y + 6)], c.filled())),
+        }
+        .map_err(draw_err(what))?;
+        area.draw(&Text::new(label, (30, y), style.clone()))
+            .map_err(draw_err(what))?;
+    }
+    Ok(())
+}
 
 fn colour(i: usize) -> RGBColor {
     const TABLE: [RGBColor; 8] = [
@@ -132,7 +194,8 @@ fn draw_panel<DB: DrawingBackend>(
     let (Some(xs), Some(ys)) = (xs, ys) else {
         return Ok(());
     };
-    let mut chart = ChartBuilder::on(area)
+    let (area, legend) = with_legend_column(area);
+    let mut chart = ChartBuilder::on(&area)
         .caption(&panel.title, (FAMILY, 20))
         .margin(10)
         .x_label_area_size(36)
@@ -150,26 +213,13 @@ fn draw_panel<DB: DrawingBackend>(
         let c = colour(i);
         chart
             .draw_series(LineSeries::new(finite(s), c.stroke_width(2)))
-            .map_err(draw_err(what))?
-            .label(s.label.as_str())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+            .map_err(draw_err(what))?;
         chart
             .draw_series(finite(s).map(|p| Circle::new(p, 3, c.filled())))
             .map_err(draw_err(what))?;
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FAMILY, 14))
-        .position(if panel.legend_top {
-            SeriesLabelPosition::UpperRight
-        } else {
-            SeriesLabelPosition::LowerRight
-        })
-        .draw()
-        .map_err(draw_err(what))?;
-    Ok(())
+    let labels = panel.series.iter().map(|s| s.label.as_str());
+    draw_legend(&legend, labels, Swatch::Line, what)
 }
 
 /// Write grouped `bars` as one PNG.
@@ -198,7 +248,8 @@ pub fn write_bars(bars: &Bars, path: &Path) -> Result<(), VizError> {
         let root = BitMapBackend::with_buffer(&mut canvas.rgb, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(draw_err(what))?;
         let n = bars.groups.len();
-        let mut chart = ChartBuilder::on(&root)
+        let (area, legend) = with_legend_column(&root);
+        let mut chart = ChartBuilder::on(&area)
             .caption(&bars.title, (FAMILY, 20))
             .margin(10)
             .x_label_area_size(36)
@@ -223,14 +274,8 @@ pub fn write_bars(bars: &Bars, path: &Path) -> Result<(), VizError> {
             .draw()
             .map_err(draw_err(what))?;
         draw_bar_series(&mut chart, bars, what)?;
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font((FAMILY, 14))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(draw_err(what))?;
+        let labels = bars.series.iter().map(|(l, _)| l.as_str());
+        draw_legend(&legend, labels, Swatch::Bar, what)?;
         root.present().map_err(draw_err(what))?;
     }
     canvas.save_png(path)
@@ -257,7 +302,7 @@ fn draw_bar_series<DB: DrawingBackend>(
     let segment = (px.end - px.start).max(1) as f64 / bars.groups.len().max(1) as f64;
     let gap = 0.1 * segment;
     let width = (segment - 2.0 * gap) / bars.series.len().max(1) as f64;
-    for (si, (label, values)) in bars.series.iter().enumerate() {
+    for (si, (_, values)) in bars.series.iter().enumerate() {
         let c = colour(si);
         let left = (gap + si as f64 * width).round() as u32;
         let right = (segment - gap - (si + 1) as f64 * width).max(0.0).round() as u32;
@@ -273,11 +318,7 @@ fn draw_bar_series<DB: DrawingBackend>(
             r.set_margin(0, 0, left, right);
             Some(r)
         });
-        chart
-            .draw_series(rects)
-            .map_err(draw_err(what))?
-            .label(label.as_str())
-            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], c.filled()));
+        chart.draw_series(rects).map_err(draw_err(what))?;
     }
     Ok(())
 }
