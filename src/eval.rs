@@ -40,6 +40,8 @@ use crate::metrics::{sample_surface, MetricsError, Normalization};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use serde::Serialize;
 
+pub mod view;
+
 /// Parameters of the per-frame score.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ScoreConfig {

@@ -13,7 +13,12 @@
 //! the posed ground-truth mesh ([`sepmem::eval`]): F-score,
 //! Chamfer-L1, precision against the full surface, recall on the part the
 //! camera saw, and the closure of the unseen side (extent along the viewing
-//! ray); the summary gives per-stream means and minima.
+//! ray); the summary gives per-stream means and minima. The robot's-view
+//! scores of [`sepmem::eval::view`] follow at the end of each row (`seen`
+//! side depth accuracy, volume `IoU` with the true solid, `rot` (°) and
+//! `tr_mm` error of the tracked pose, `cover`: share of the true surface
+//! seen so far), and a `view` line per stream gives them, with F, over the
+//! first and the last third of the frames.
 //!
 //! `--compare-cold` also reconstructs every frame from a cold start (no
 //! deadline, the cold iteration cap) outside the timed pipeline, and reports
@@ -31,6 +36,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use sepmem::bag::{Bag, BagWriter};
 use sepmem::config::Config;
+use sepmem::eval::view::{ViewFrame, ViewScore, ViewTracker};
 use sepmem::eval::{cold_references, score_frame, FrameScore, ScoreConfig};
 use sepmem::pipeline::engine::Engine;
 use sepmem::pipeline::StartPath;
@@ -137,6 +143,10 @@ pub struct Options {
 #[derive(Debug, Default)]
 struct StreamSummary {
     scores: Vec<FrameScore>,
+    /// The robot's-view scores, one per entry of `scores`.
+    views: Vec<ViewScore>,
+    /// The tracked pose and coverage behind `views`.
+    view_tracker: ViewTracker,
     /// (ΔF, warm/cold iteration ratio) of warm frames.
     warm_vs_cold: Vec<(f64, f64)>,
     /// Over the warm frames' cold references (with more than one per
@@ -252,6 +262,12 @@ pub fn run_opts(
             header += &format!(" {:>6}", "spread");
         }
     }
+    if scored {
+        header += &format!(
+            " {:>6} {:>6} {:>6} {:>6} {:>6}",
+            "seen", "IoU", "rot", "tr_mm", "cover"
+        );
+    }
     print(header);
     let (mut latencies, mut warm_it, mut cold_it) = (Vec::new(), Vec::new(), Vec::new());
     let (mut bad_samples, mut failed) = (0usize, 0usize);
@@ -353,6 +369,12 @@ pub fn run_opts(
                             line += &format!(" {:>6.3}", max(&f_refs) - min(&f_refs));
                         }
                     }
+                    if let Some(gt) = &gt {
+                        let v = view_score(&truth, entry, &id, stamp, gt, r, cfg.metrics.tau)?;
+                        line += &view_columns(v.as_ref());
+                    } else if scored {
+                        line += &view_columns(None);
+                    }
                     print(line);
                     pictures.frame(&FrameView {
                         stream: &id,
@@ -444,6 +466,9 @@ pub fn run_opts(
                 score_cfg.samples,
             );
         }
+        if !st.views.is_empty() {
+            println!("{}", view_summary(id, st));
+        }
         if opts.compare_cold && !st.warm_vs_cold.is_empty() {
             let df: Vec<f64> = st.warm_vs_cold.iter().map(|x| x.0).collect();
             let ratio: Vec<f64> = st.warm_vs_cold.iter().map(|x| x.1).collect();
@@ -480,6 +505,87 @@ pub fn run_opts(
         );
     }
     Ok(())
+}
+
+/// The robot's-view scores of one frame, recorded in the stream's summary
+/// (`None` when the bag has no truth frame for this stamp).
+fn view_score(
+    truth: &GroundTruthIndex,
+    entry: &mut StreamSummary,
+    id: &str,
+    stamp: i64,
+    posed_truth: &sepmem::TriMesh,
+    r: &sepmem::pipeline::FrameResult,
+    tau_fraction: f64,
+) -> Result<Option<ViewScore>> {
+    let (Some(track), Some(frame)) = (truth.streams.get(id), truth.frame(id, stamp)) else {
+        return Ok(None);
+    };
+    let v = entry
+        .view_tracker
+        .score(&ViewFrame {
+            truth: frame,
+            track,
+            posed_truth,
+            mesh: &r.reconstruction.mesh,
+            warm_motion: r.motion.filter(|_| r.path == StartPath::Warm),
+            tau_fraction,
+        })
+        .with_context(|| format!("view scores of {id} frame {}", r.frame))?;
+    entry.views.push(v);
+    Ok(Some(v))
+}
+
+/// The per-frame columns `seen IoU rot tr_mm cover` (dashes without a score).
+fn view_columns(v: Option<&ViewScore>) -> String {
+    let opt = |x: Option<f64>| x.map_or_else(|| "-".to_string(), |x| format!("{x:.3}"));
+    match v {
+        Some(v) => format!(
+            " {:>6} {:>6} {:>6.2} {:>6.1} {:>6.3}",
+            opt(v.seen_side),
+            opt(v.volume_iou),
+            v.rotation_deg,
+            v.translation_mm,
+            v.coverage
+        ),
+        None => format!(" {:>6} {:>6} {:>6} {:>6} {:>6}", "-", "-", "-", "-", "-"),
+    }
+}
+
+/// The `view` summary line of a stream: the whole-object F, seen side,
+/// volume IoU, pose error and coverage over the first and the last third
+/// of its scored frames (means), the median seen side over all frames,
+/// and the largest pose error.
+fn view_summary(id: &str, st: &StreamSummary) -> String {
+    let n = st.views.len().min(st.scores.len());
+    let third = n.div_ceil(3);
+    let part = |range: std::ops::Range<usize>| {
+        let f: Vec<f64> = st.scores[range.clone()].iter().map(|s| s.fscore).collect();
+        let v = &st.views[range];
+        let pick = |g: fn(&ViewScore) -> Option<f64>| v.iter().filter_map(g).collect::<Vec<_>>();
+        format!(
+            "F {:.3} seen side {:.3} IoU {:.3} rot {:.2} deg trans {:.1} mm coverage {:.3}",
+            mean(&f),
+            mean(&pick(|v| v.seen_side)),
+            mean(&pick(|v| v.volume_iou)),
+            mean(&pick(|v| Some(v.rotation_deg))),
+            mean(&pick(|v| Some(v.translation_mm))),
+            mean(&pick(|v| Some(v.coverage))),
+        )
+    };
+    let views = &st.views[..n];
+    let mut seen: Vec<f64> = views.iter().filter_map(|v| v.seen_side).collect();
+    seen.sort_by(f64::total_cmp);
+    let all = |g: fn(&ViewScore) -> f64| views.iter().map(g).collect::<Vec<_>>();
+    format!(
+        "view {id}: {n} frames; first third ({third}): {}; last third ({third}): {}; seen side median {:.3} min {:.3}; pose error max rot {:.2} deg trans {:.1} mm",
+        part(0..third),
+        part(n - third..n),
+        percentile(&seen, 0.5),
+        min(&seen),
+        max(&all(|v| v.rotation_deg)),
+        max(&all(|v| v.translation_mm)),
+    )
 }
 
 /// `latency ms p50 … p95 … max …` of sorted latencies, or a plain

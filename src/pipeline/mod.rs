@@ -99,6 +99,9 @@ pub struct PipelineConfig {
     /// Limits on the objects of a stream (cap per frame, label eviction,
     /// quality verdict), see [`objects`].
     pub objects: objects::ObjectsConfig,
+    /// The per-object model fused over frames ([`crate::model`]): `None`
+    /// (null) keeps each frame on its own view.
+    pub model: Option<crate::model::ModelConfig>,
 }
 
 impl Default for PipelineConfig {
@@ -127,6 +130,7 @@ impl Default for PipelineConfig {
             score_samples: 10_000,
             score_visible_radius: 0.02,
             objects: objects::ObjectsConfig::default(),
+            model: None,
         }
     }
 }
@@ -299,11 +303,22 @@ fn alignment_model(mesh: &TriMesh) -> (Vec<Vec3>, Vec<Vec3>) {
 /// Fewest on-data vertices for [`alignment_model`] to use them alone.
 const MIN_ALIGN_VERTICES: usize = 50;
 
+/// A stream's fused model and the tracked pose it is kept in: the object's
+/// frame is the cloud frame of the stream's last cold frame, and each warm
+/// frame's rigid motion (previous surface → new points) moves the pose on.
+#[derive(Debug, Clone)]
+struct Fused {
+    model: crate::model::ObjectModel,
+    /// Object frame → this frame's cloud frame.
+    pose: align::Rigid,
+}
+
 /// Per-stream state: the previous surface for warm starts, and counts.
 #[derive(Debug, Clone)]
 pub struct Tracker {
     key: StreamKey,
     previous: Option<Previous>,
+    fused: Option<Fused>,
     stats: StreamStats,
 }
 
@@ -313,6 +328,7 @@ impl Tracker {
         Self {
             key,
             previous: None,
+            fused: None,
             stats: StreamStats::default(),
         }
     }
@@ -330,6 +346,7 @@ impl Tracker {
     /// Forget the previous surface: the next frame starts cold.
     pub fn reset(&mut self) {
         self.previous = None;
+        self.fused = None;
     }
 
     /// Process one frame: decide the path, evolve under the budget, remember
@@ -394,7 +411,8 @@ impl Tracker {
                 min: cfg.min_points.max(4),
             });
         }
-        let cloud = &*thinned(cloud, cfg);
+        let raw = cloud;
+        let cloud = &*thinned(raw, cfg);
         let Deadlines {
             warm: deadline,
             cold: cold_deadline,
@@ -403,6 +421,9 @@ impl Tracker {
         let size = cloud.aabb().longest_edge();
 
         let (path, mut reason, warm, motion) = self.choose_path(cloud, centroid, size, cfg);
+        let fused = self.fuse(raw, path, motion, size, cfg);
+        let fused = fused.as_ref().map(|c| thinned(c, cfg));
+        let input: &PointCloud = fused.as_deref().unwrap_or(cloud);
         let cap = match path {
             StartPath::Warm => cfg.warm_max_iterations.max(1),
             StartPath::Cold => cold_cap(membranes.cold.config(), cfg),
@@ -427,7 +448,7 @@ impl Tracker {
             None => (&membranes.cold, Start::Cold),
         };
         let mut rec = engine
-            .reconstruct(cloud, &budget, &start_from)
+            .reconstruct(input, &budget, &start_from)
             .map_err(membrane_err)?;
         let mut iterations = rec.report.iterations;
         let mut final_path = path;
@@ -473,6 +494,7 @@ impl Tracker {
                     if cold_eta >= threshold && cold_eta >= eta {
                         final_path = StartPath::Cold;
                         rec = cold;
+                        self.restart_fused(raw, size, cfg);
                     } else {
                         reason = PathReason::WarmKept {
                             eta,
@@ -514,6 +536,42 @@ impl Tracker {
             motion,
             latency_ms: start.elapsed().as_secs_f64() * 1e3,
         })
+    }
+
+    /// Fuse this frame into the stream's model (when `pipeline.model` is
+    /// set) and return the fused points in this frame's cloud frame, the
+    /// input of the membrane. A cold frame restarts the model.
+    fn fuse(
+        &mut self,
+        raw: &PointCloud,
+        path: StartPath,
+        motion: Option<align::Rigid>,
+        size: f64,
+        cfg: &PipelineConfig,
+    ) -> Option<PointCloud> {
+        cfg.model.as_ref()?;
+        match (path, motion) {
+            (StartPath::Warm, Some(m)) if self.fused.is_some() => {
+                if let Some(f) = self.fused.as_mut() {
+                    f.pose = m * f.pose;
+                    f.model.integrate(&raw.points, &f.pose);
+                }
+            }
+            _ => self.restart_fused(raw, size, cfg),
+        }
+        let f = self.fused.as_ref()?;
+        Some(PointCloud::from_points(f.model.points_in(&f.pose)))
+    }
+
+    /// A new model from this frame alone, in this frame's cloud frame.
+    fn restart_fused(&mut self, raw: &PointCloud, size: f64, cfg: &PipelineConfig) {
+        let Some(mc) = &cfg.model else {
+            return;
+        };
+        let pose = align::Rigid::identity();
+        let mut model = crate::model::ObjectModel::new(mc.clone(), size);
+        model.integrate(&raw.points, &pose);
+        self.fused = Some(Fused { model, pose });
     }
 
     fn choose_path(
