@@ -18,10 +18,12 @@
 //!   recently seen beyond `max_tracked`, are freed; with `reidentify`, a new
 //!   label that continues an object whose label just went takes over its
 //!   tracker ([`ObjectBook::checkout_frame`]). Measured in the soak (`sepmem
-//!   bench-node --hostile --duration 60`, idle machine): with the churn
-//!   stream cold-starting every frame (~240 ms each, at its 0.5-core share)
-//!   the healthy streams were meshed 92-94 % at p95 43.7 ms; re-identified,
-//!   99.3-99.6 % at p95 31.1 ms.
+//!   bench-node --hostile --duration 60`, idle 2-core machine): with
+//!   `reidentify: null` the churn stream cold-starts every frame (p50 226
+//!   ms, held to its 0.5-core share: 452 frames over budget) and the four
+//!   healthy streams were meshed 95.1-97.1 %; re-identified, the churn
+//!   frames are warm (p50 15 ms) and the healthy streams 99.3-99.6 %
+//!   meshed (p95 28.4 -> 31.1 ms, as more frames are computed).
 //! * [`Quality`]: a surface that did not converge carries its verdict in
 //!   every output, and never replaces the last good mesh of its object: the
 //!   node publishes that last good mesh again, marked [`Quality::Held`],
