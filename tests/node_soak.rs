@@ -47,9 +47,10 @@ fn healthy_streams_keep_meshing_and_every_hostile_input_is_counted() {
         assert!(counted, "{name} not counted: {k}");
         assert!(k["sent"].as_u64().unwrap() > 0, "{name} never sent");
     }
-    // A new label every frame (each a cold start, so the churn stream runs
-    // at its compute share): labels silent for 3 s were forgotten, and the
-    // statuses stayed bounded (pipeline.objects.max_tracked 64 per stream).
+    // A new label every frame on the same object: each new label took over
+    // the tracker of the one before (a warm start, not a cold one), the old
+    // label's status was freed, and the statuses stayed bounded
+    // (pipeline.objects.max_tracked 64 per stream).
     assert!(
         kinds["churn"]["count"].as_u64().unwrap() >= 10,
         "{}",

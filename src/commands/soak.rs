@@ -6,7 +6,9 @@
 //! * `poison`: the 133-byte PointCloud2 (width = height = 0, x y z and one
 //!   INT8 field of count 4·10⁹, point_step 4·10⁹ + 12), 2 Hz → `invalid_layout`.
 //! * `bomb`: 20 000 points in 400 labels of 50, 1 Hz → `objects_skipped`.
-//! * `churn`: 2 000 points with a new label every frame, 10 Hz → `labels_evicted`.
+//! * `churn`: 2 000 points with a new label every frame, 10 Hz →
+//!   `labels_reidentified` (each new label takes over the tracker of the
+//!   one before, `pipeline.objects.reidentify`).
 //! * `oversized`: alternately a message above zenoh's receive limit (dropped
 //!   by zenoh while it arrives, never held whole; the node cannot count it)
 //!   and a cloud just above `wire.max_bytes` that zenoh delivers, 1 Hz →
@@ -32,7 +34,7 @@ use std::time::Duration;
 pub const KINDS: [(&str, &str); 5] = [
     ("poison", reasons::INVALID_LAYOUT),
     ("bomb", reasons::OBJECTS_SKIPPED),
-    ("churn", reasons::LABELS_EVICTED),
+    ("churn", reasons::LABELS_REIDENTIFIED),
     ("oversized", reasons::TOO_LARGE),
     ("malformed", reasons::MALFORMED_CDR),
 ];

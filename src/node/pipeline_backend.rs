@@ -218,10 +218,15 @@ impl TopicProcessor for EngineProcessor {
         // The node's deadline runs from receipt; every object of a labelled
         // cloud shares it, however many compute waves the objects take.
         let deadlines = node_deadlines(&self.pipeline, frame.deadline);
-        let mut work: Vec<(Entry, StreamCloud)> = streams
-            .into_iter()
-            .map(|s| (self.objects.checkout(&s.key), s))
-            .collect();
+        let (entries, reidentified) = self
+            .objects
+            .checkout_frame(&streams, self.pipeline.objects.reidentify.as_ref());
+        reasons::bump(
+            &mut out.counts,
+            reasons::LABELS_REIDENTIFIED,
+            reidentified.len() as u64,
+        );
+        let mut work: Vec<(Entry, StreamCloud)> = entries.into_iter().zip(streams).collect();
         let (membranes, pipeline) = (&self.membranes, &self.pipeline);
         let outcomes: Vec<_> = work
             .par_iter_mut()
@@ -266,7 +271,11 @@ impl TopicProcessor for EngineProcessor {
                 Some(out.errors.join("; "))
             },
             counts: out.counts,
-            evicted: evicted.iter().map(ToString::to_string).collect(),
+            evicted: evicted
+                .iter()
+                .chain(&reidentified)
+                .map(ToString::to_string)
+                .collect(),
         }
     }
 

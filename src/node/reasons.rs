@@ -3,7 +3,7 @@
 //!
 //! Each hostile input found when the node was attacked (issue 22) lands
 //! under a reason of its own, so an operator can tell a buggy segmenter
-//! (`objects_skipped`, `labels_evicted`) from a broken bridge
+//! (`objects_skipped`, `labels_evicted`, `labels_reidentified`) from a broken bridge
 //! (`malformed_cdr`), a size lie (`too_large`, `invalid_layout`) or an
 //! overloaded node (`over_budget`, `outputs_failed`, `drops`). Counters are
 //! plain `u64` sums per stream; the node status adds them over all streams,
@@ -27,6 +27,9 @@ pub const OBJECTS_SKIPPED: &str = "objects_skipped";
 /// Per-label trackers freed after `pipeline.objects.forget_after_ms` of
 /// silence or because `pipeline.objects.max_tracked` were held.
 pub const LABELS_EVICTED: &str = "labels_evicted";
+/// Labels new to their stream that continued an object whose label had
+/// just gone (`pipeline.objects.reidentify`): its tracker was taken over.
+pub const LABELS_REIDENTIFIED: &str = "labels_reidentified";
 /// Object frames whose surface did not converge (published with their
 /// verdict, or replaced by the object's last good mesh).
 pub const UNFITTED: &str = "unfitted";
@@ -39,12 +42,13 @@ pub const OUTPUTS_FAILED: &str = "outputs_failed";
 pub const OBJECT_ERRORS: &str = "object_errors";
 
 /// Every reason, in the order `/diagnostics` lists them.
-pub const ALL: [&str; 9] = [
+pub const ALL: [&str; 10] = [
     MALFORMED_CDR,
     TOO_LARGE,
     INVALID_LAYOUT,
     OBJECTS_SKIPPED,
     LABELS_EVICTED,
+    LABELS_REIDENTIFIED,
     UNFITTED,
     OVER_BUDGET,
     OUTPUTS_FAILED,

@@ -343,6 +343,29 @@ impl Tracker {
         self.stats
     }
 
+    /// How far a segment with this centroid and size lies from the object
+    /// this tracker last fitted, as a fraction of the larger size, when it
+    /// is within `max_motion` of it and its size within `max_size_change`
+    /// (both fractions); `None` without a previous surface or beyond them.
+    pub fn continuation(
+        &self,
+        centroid: Vec3,
+        size: f64,
+        max_motion: f64,
+        max_size_change: f64,
+    ) -> Option<f64> {
+        let prev = self.previous.as_ref()?;
+        let scale = prev.size.max(size).max(f64::MIN_POSITIVE);
+        let moved = (centroid - prev.centroid).norm() / scale;
+        let resized = (size - prev.size).abs() / scale;
+        (moved <= max_motion && resized <= max_size_change).then_some(moved)
+    }
+
+    /// Follow another stream key (a re-identified label), history kept.
+    pub fn rekey(&mut self, key: StreamKey) {
+        self.key = key;
+    }
+
     /// Forget the previous surface: the next frame starts cold.
     pub fn reset(&mut self) {
         self.previous = None;
