@@ -3,7 +3,9 @@
 //! The annotated file `launch/sepmem.json5` is the single source of the
 //! defaults: it is embedded in the binary, parsed at start-up, and must name
 //! every parameter (the structs below deny unknown keys and have no serde
-//! defaults, so a parameter missing from the file fails the build's tests).
+//! defaults, so a parameter missing from the file fails the build's tests;
+//! an optional one, which serde would read as `None`, is caught by the test
+//! that compares the file's keys with the serialised defaults).
 //!
 //! Layering, lowest first:
 //! 1. the embedded `launch/sepmem.json5`;
@@ -14,7 +16,9 @@
 //!    otherwise.
 //!
 //! A key that does not exist in the defaults is an error that names it, so a
-//! typo never silently falls back to a default.
+//! typo never silently falls back to a default. A key that was renamed (the
+//! flat `membrane` keys before the section moved into one sub-section per
+//! module) is an error that names its new key ([`RENAMED`]).
 
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
@@ -51,6 +55,18 @@ pub enum ConfigError {
         /// Where it came from.
         origin: String,
     },
+    /// A key that was renamed: the error names the new one.
+    #[error("parameter `{old}` in {origin} was renamed to `{new}`{note} (see launch/sepmem.json5)")]
+    RenamedKey {
+        /// The old dotted key.
+        old: String,
+        /// The new dotted key.
+        new: &'static str,
+        /// How the value changed, if it did (starts with "; ").
+        note: String,
+        /// Where it came from.
+        origin: String,
+    },
     /// A `--set` argument is not of the form `key=value`.
     #[error("override `{0}` is not of the form section.key=value")]
     BadOverride(String),
@@ -58,6 +74,67 @@ pub enum ConfigError {
     #[error("invalid configuration: {0}")]
     Invalid(String),
 }
+
+/// Renamed keys: old dotted key, new dotted key, and how the value changed
+/// (empty when only the name did). Consulted where an unknown key is reported.
+pub const RENAMED: &[(&str, &str, &str)] = &[
+    ("membrane.max_points", "membrane.prepare.max_points", "null keeps every point, not 0"),
+    ("membrane.knn_k", "membrane.prepare.knn_k", ""),
+    ("membrane.outlier_factor", "membrane.prepare.outlier_factor", "null turns the filter off, not 0"),
+    ("membrane.density_sample", "membrane.prepare.density_sample", "null: every point, not 0"),
+    ("membrane.local_delta", "membrane.prepare.search_delta", "\"global\" or \"local\", not a boolean"),
+    ("membrane.delta_quantile", "membrane.prepare.delta_quantile", ""),
+    ("membrane.delta_scale", "membrane.prepare.delta_scale", ""),
+    ("membrane.pole_axis", "membrane.init.pole_axis", ""),
+    ("membrane.pole_axis_candidates", "membrane.init.pole_axis_candidates", ""),
+    ("membrane.pole_axis_support", "membrane.init.pole_axis_support", ""),
+    ("membrane.init_quantile", "membrane.init.quantile", ""),
+    ("membrane.init_margin", "membrane.init.margin", ""),
+    ("membrane.grid_start", "membrane.init.grid", ""),
+    ("membrane.grid_max", "membrane.schedule.growth.grid_max", ""),
+    ("membrane.grid_step", "membrane.schedule.growth.grid_step", ""),
+    ("membrane.adaptive", "membrane.schedule.growth", "an object { grid_max, grid_step, g_min, grow_after } grows the grid, null keeps it fixed"),
+    ("membrane.g_min", "membrane.schedule.growth.g_min", ""),
+    ("membrane.grow_after", "membrane.schedule.growth.grow_after", ""),
+    ("membrane.div_min", "membrane.fit.div_min", ""),
+    ("membrane.alpha", "membrane.fit.alpha", ""),
+    ("membrane.alpha_warm", "membrane.fit.alpha_warm", ""),
+    ("membrane.roughness", "membrane.fit.roughness", ""),
+    ("membrane.redistribute_stretch", "membrane.fit.redistribute_stretch", "null turns it off, not 0"),
+    ("membrane.boundaries", "membrane.step.boundaries", ""),
+    ("membrane.beta", "membrane.step.beta", ""),
+    ("membrane.cross_scale", "membrane.step.cross_scale", ""),
+    ("membrane.cross_min_delta", "membrane.step.cross_min_delta", ""),
+    ("membrane.cross_max", "membrane.step.cross_max", ""),
+    ("membrane.band_inner_delta", "membrane.step.band_inner_delta", ""),
+    ("membrane.band_outer_delta", "membrane.step.band_outer_delta", ""),
+    ("membrane.inside_denser", "membrane.step.inside_denser", "an object { inner_margin } keeps the rule, null accepts every boundary"),
+    ("membrane.inner_margin", "membrane.step.inside_denser.inner_margin", ""),
+    ("membrane.significance", "membrane.step.significance", ""),
+    ("membrane.sparse_warm_search", "membrane.step.sparse_warm_search", ""),
+    ("membrane.sparse_cold_search", "membrane.step.sparse_cold_search", ""),
+    ("membrane.inward_force", "membrane.step.inward", "an object { voxel_delta, min_points, shift } keeps it, null turns it off"),
+    ("membrane.inward_voxel_delta", "membrane.step.inward.voxel_delta", ""),
+    ("membrane.inward_min_points", "membrane.step.inward.min_points", ""),
+    ("membrane.inward_step", "membrane.step.inward.shift", ""),
+    ("membrane.spatial_weight", "membrane.step.spatial_weight", ""),
+    ("membrane.attributes", "membrane.step.attributes", ""),
+    ("membrane.threads", "membrane.step.threads", ""),
+    ("membrane.median_filter", "membrane.regularize.median_filter", ""),
+    ("membrane.pole_tension", "membrane.regularize.pole_tension.strength", "now part of the object regularize.pole_tension { strength, rows }, which null turns off (not 0)"),
+    ("membrane.pole_tension_rows", "membrane.regularize.pole_tension.rows", ""),
+    ("membrane.warm_back_smoothing", "membrane.regularize.warm_back_smoothing", "null turns it off, not 0"),
+    ("membrane.depth_start", "membrane.schedule.depth_start", ""),
+    ("membrane.depth_warm", "membrane.schedule.depth_warm", ""),
+    ("membrane.depth_decay", "membrane.schedule.depth_decay", ""),
+    ("membrane.depth_floor_delta", "membrane.schedule.depth_floor_delta", ""),
+    ("membrane.plateau_eps", "membrane.schedule.plateau_eps", ""),
+    ("membrane.plateau_patience", "membrane.schedule.plateau_patience", ""),
+    ("membrane.max_iterations", "membrane.schedule.max_iterations", ""),
+    ("membrane.time_limit_ms", "membrane.schedule.time_limit_ms", "null: no limit, not 0"),
+    ("membrane.viewpoint", "membrane.view.viewpoint", ""),
+    ("membrane.view_completion", "membrane.view.completion", "\"none\" or \"mirror\", not a boolean"),
+];
 
 /// Every sepmem parameter. Sections are documented in `launch/sepmem.json5`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -158,10 +235,9 @@ fn merge(
                     prefix.push('.');
                 }
                 prefix.push_str(&k);
-                let slot = b.get_mut(&k).ok_or_else(|| ConfigError::UnknownKey {
-                    key: prefix.clone(),
-                    origin: origin.to_string(),
-                })?;
+                let slot = b
+                    .get_mut(&k)
+                    .ok_or_else(|| unknown_key(prefix, origin))?;
                 merge(slot, v, prefix, origin)?;
                 prefix.truncate(len);
             }
@@ -171,6 +247,27 @@ fn merge(
             *slot = v;
             Ok(())
         }
+    }
+}
+
+/// The error for a key missing from the defaults: [`ConfigError::RenamedKey`]
+/// when [`RENAMED`] lists it, [`ConfigError::UnknownKey`] otherwise.
+fn unknown_key(key: &str, origin: &str) -> ConfigError {
+    match RENAMED.iter().find(|(old, _, _)| *old == key) {
+        Some(&(_, new, note)) => ConfigError::RenamedKey {
+            old: key.to_string(),
+            new,
+            note: if note.is_empty() {
+                String::new()
+            } else {
+                format!("; {note}")
+            },
+            origin: origin.to_string(),
+        },
+        None => ConfigError::UnknownKey {
+            key: key.to_string(),
+            origin: origin.to_string(),
+        },
     }
 }
 
@@ -208,5 +305,66 @@ mod tests {
         assert!(err.to_string().contains("`no_such`"), "{err}");
         let err = Config::load(None, &["missing_equals".into()]).unwrap_err();
         assert!(matches!(err, ConfigError::BadOverride(_)));
+    }
+
+    #[test]
+    fn old_membrane_keys_name_their_new_keys() {
+        for (old, new) in [
+            ("membrane.alpha=2", "`membrane.fit.alpha`"),
+            ("membrane.threads=1", "`membrane.step.threads`"),
+            ("membrane.inward_force=false", "`membrane.step.inward`"),
+            ("membrane.pole_tension_rows=3", "`membrane.regularize.pole_tension.rows`"),
+        ] {
+            let err = Config::load(None, &[old.into()]).unwrap_err();
+            assert!(matches!(err, ConfigError::RenamedKey { .. }), "{err}");
+            assert!(err.to_string().contains(new), "{old}: {err}");
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("user.toml");
+        std::fs::write(&path, "[membrane]\nmax_iterations = 10\n").unwrap();
+        let err = Config::load(Some(&path), &[]).unwrap_err();
+        let text = err.to_string();
+        assert!(text.contains("`membrane.max_iterations`"), "{text}");
+        assert!(text.contains("`membrane.schedule.max_iterations`"), "{text}");
+    }
+
+    #[test]
+    fn every_old_key_is_gone_and_every_new_key_exists() {
+        let defaults = serde_json::to_value(Config::defaults().unwrap()).unwrap();
+        let at = |key: &str| {
+            key.split('.')
+                .try_fold(&defaults, |v, part| v.as_object()?.get(part))
+        };
+        for (old, new, _) in RENAMED {
+            assert!(at(old).is_none(), "{old} still exists");
+            assert!(at(new).is_some(), "{new} does not exist");
+        }
+    }
+
+    /// The key paths of `v` (objects only; arrays and scalars are leaves).
+    fn key_paths(v: &Value, prefix: &str, out: &mut Vec<String>) {
+        if let Value::Object(m) = v {
+            for (k, child) in m {
+                let path = format!("{prefix}{k}");
+                key_paths(child, &format!("{path}."), out);
+                out.push(path);
+            }
+        }
+    }
+
+    /// The embedded file names every key, including the optional ones
+    /// (an `Option` missing from the file would otherwise read as `None`),
+    /// and its membrane section equals `MembraneConfig::default()`.
+    #[test]
+    fn embedded_file_documents_every_key_and_matches_the_defaults() {
+        let cfg = Config::defaults().unwrap();
+        let embedded = parse_text(DEFAULT_CONFIG, "json5", "embedded").unwrap();
+        let (mut file, mut typed) = (Vec::new(), Vec::new());
+        key_paths(&embedded, "", &mut file);
+        key_paths(&serde_json::to_value(&cfg).unwrap(), "", &mut typed);
+        file.sort();
+        typed.sort();
+        assert_eq!(file, typed);
+        assert_eq!(cfg.membrane, crate::membrane::MembraneConfig::default());
     }
 }

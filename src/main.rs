@@ -54,7 +54,7 @@ enum Command {
         /// Configuration file (.json5 or .toml) holding the keys to change.
         #[arg(long)]
         config: Option<PathBuf>,
-        /// Override one parameter: section.key=value (repeatable), e.g. membrane.beta=0.8.
+        /// Override one parameter: section.key=value (repeatable), e.g. membrane.step.beta=0.8.
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
         /// Also write the full report (per-iteration η_g, grids and times,

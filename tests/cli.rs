@@ -385,6 +385,37 @@ fn too_many_metric_samples_is_a_configuration_error() {
     );
 }
 
+/// Issue 19 (3): the flat membrane keys moved into sections; an old key,
+/// through `--set` or a user file, is an error that names its new key.
+#[test]
+fn an_old_membrane_key_names_its_new_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("old.json5");
+    std::fs::write(&file, "{ membrane: { grid_max: [32, 20] } }").unwrap();
+    let cases = [
+        (
+            vec!["config", "--set", "membrane.alpha=2"],
+            "`membrane.alpha` in --set was renamed to `membrane.fit.alpha`",
+        ),
+        (
+            vec!["config", "--set", "membrane.outlier_factor=0"],
+            "renamed to `membrane.prepare.outlier_factor`; null turns the filter off",
+        ),
+        (
+            vec!["config", "--config", p(&file)],
+            "was renamed to `membrane.schedule.growth.grid_max`",
+        ),
+    ];
+    for (args, want) in cases {
+        let o = sepmem(&args);
+        assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+        assert!(String::from_utf8_lossy(&o.stderr).contains(want), "{want}: {}", text(&o));
+    }
+    let o = sepmem(&["config", "--set", "membrane.fit.alpha=2.5"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("\"alpha\": 2.5"), "{}", text(&o));
+}
+
 /// Issue 22 (10): when no frame succeeds the replay summary says so (it
 /// printed "p50 NaN"); a truncated bag says it is truncated and where.
 #[test]

@@ -103,10 +103,9 @@ fn check_mesh(mesh: &TriMesh) {
 }
 
 fn serial() -> MembraneConfig {
-    MembraneConfig {
-        threads: 1,
-        ..MembraneConfig::default()
-    }
+    let mut cfg = MembraneConfig::default();
+    cfg.step.threads = 1;
+    cfg
 }
 
 fn score(mesh: &TriMesh, gt_dense: &[Vec3]) -> f64 {
@@ -166,11 +165,9 @@ fn bowl_hollow_is_entered_on_clean_points() {
 fn mug_cavity_gets_samples_from_the_ring_redistribution() {
     let gt = sepmem::shapes::mug(128).unwrap().mesh;
     let dense = sample_mesh(&gt, 100_000, 98);
-    let run = |stretch: f64| -> f64 {
-        let cfg = MembraneConfig {
-            redistribute_stretch: stretch,
-            ..serial()
-        };
+    let run = |stretch: Option<f64>| -> f64 {
+        let mut cfg = serial();
+        cfg.fit.redistribute_stretch = stretch;
         (1..=2)
             .map(|seed| {
                 let cloud = PointCloud::from_points(sample_mesh(&gt, 20_000, seed));
@@ -182,8 +179,8 @@ fn mug_cavity_gets_samples_from_the_ring_redistribution() {
             / 2.0
     };
     let (on, off) = (
-        run(MembraneConfig::default().redistribute_stretch),
-        run(0.0),
+        run(MembraneConfig::default().fit.redistribute_stretch),
+        run(None),
     );
     eprintln!("mug: mean F {on:.3} with redistribution, {off:.3} without");
     assert!(
@@ -204,10 +201,8 @@ fn torus_pole_axis_selection_takes_the_poles_out_of_the_hole() {
     let dense = sample_mesh(&gt, 100_000, 98);
     let cloud = PointCloud::from_points(sample_mesh(&gt, 20_000, 1));
     let run = |candidates: usize| {
-        let cfg = MembraneConfig {
-            pole_axis_candidates: candidates,
-            ..serial()
-        };
+        let mut cfg = serial();
+        cfg.init.pole_axis_candidates = candidates;
         let rec = reconstruct(&cloud, &cfg, &Budget::unlimited(), None).unwrap();
         check_mesh(&rec.mesh);
         (score(&rec.mesh, &dense), rec.report)
@@ -305,7 +300,7 @@ fn sphere_sweep_sigma_01_poles_are_not_left_as_horns() {
 
 #[test]
 fn sampled_density_filters_outliers_and_finds_delta_like_the_exact_one() {
-    // membrane.density_sample (the warm frames' fast prepare): d_i of 256
+    // membrane.prepare.density_sample (the warm frames' fast prepare): d_i of 256
     // points only and a voxel-count outlier filter, against the paper's
     // per-point filter, on a sphere with 5 % uniform outliers around it.
     let a = Vec3::repeat(0.5);
@@ -322,10 +317,8 @@ fn sampled_density_filters_outliers_and_finds_delta_like_the_exact_one() {
     let cloud = PointCloud::from_points(pts);
     let gt = ellipsoid(100_000, a, Vec3::zeros(), 96);
     let exact = reconstruct(&cloud, &serial(), &Budget::unlimited(), None).unwrap();
-    let sampled_cfg = MembraneConfig {
-        density_sample: 256,
-        ..serial()
-    };
+    let mut sampled_cfg = serial();
+    sampled_cfg.prepare.density_sample = Some(256);
     let sampled = reconstruct(&cloud, &sampled_cfg, &Budget::unlimited(), None).unwrap();
     let (re, rs) = (&exact.report, &sampled.report);
     eprintln!(
@@ -474,13 +467,11 @@ fn bad_inputs_give_errors_not_panics() {
             .collect(),
     );
     assert!(reconstruct(&flat, &cfg, &Budget::unlimited(), None).is_err());
-    let bad = MembraneConfig {
-        beta: 0.0,
-        ..serial()
-    };
+    let mut bad = serial();
+    bad.step.beta = 0.0;
     let ok = PointCloud::from_points(ellipsoid(500, Vec3::repeat(0.5), Vec3::zeros(), 9));
     let err = reconstruct(&ok, &bad, &Budget::unlimited(), None).unwrap_err();
-    assert!(err.to_string().contains("beta"), "{err}");
+    assert!(err.to_string().contains("`step.beta`"), "{err}");
 }
 
 #[test]
@@ -503,14 +494,12 @@ fn colour_weighting_separates_object_from_same_density_clutter() {
     }
     let gt = ellipsoid(100_000, Vec3::repeat(0.5), Vec3::zeros(), 95);
     let spatial = reconstruct(&cloud, &serial(), &Budget::unlimited(), None).unwrap();
-    let weighted_cfg = MembraneConfig {
-        spatial_weight: 1.0,
-        attributes: vec![AttributeWeight {
-            name: "luma".into(),
-            weight: 1.0,
-        }],
-        ..serial()
-    };
+    let mut weighted_cfg = serial();
+    weighted_cfg.step.spatial_weight = 1.0;
+    weighted_cfg.step.attributes = vec![AttributeWeight {
+        name: "luma".into(),
+        weight: 1.0,
+    }];
     let weighted = reconstruct(&cloud, &weighted_cfg, &Budget::unlimited(), None).unwrap();
     check_mesh(&weighted.mesh);
     let (fs, fw) = (score(&spatial.mesh, &gt), score(&weighted.mesh, &gt));
@@ -519,13 +508,11 @@ fn colour_weighting_separates_object_from_same_density_clutter() {
     assert!(fw >= fs + 0.3, "weighting must help: {fs} -> {fw}");
 
     // A channel the cloud does not carry is a typed error.
-    let missing = MembraneConfig {
-        attributes: vec![AttributeWeight {
-            name: "temperature".into(),
-            weight: 1.0,
-        }],
-        ..serial()
-    };
+    let mut missing = serial();
+    missing.step.attributes = vec![AttributeWeight {
+        name: "temperature".into(),
+        weight: 1.0,
+    }];
     let err = reconstruct(&cloud, &missing, &Budget::unlimited(), None).unwrap_err();
     assert!(err.to_string().contains("temperature"), "{err}");
 }

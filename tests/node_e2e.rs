@@ -6,7 +6,7 @@
 //! τ = 1 % of the object size, ONet/SAP protocol). The decoded meshes must
 //! also equal those of the in-process frame engine on the same frames (an
 //! independent path: no transport, no backend). The node runs without a
-//! deadline, with a serial membrane (`membrane.threads=1`: with the parallel
+//! deadline, with a serial membrane (`membrane.step.threads=1`: with the parallel
 //! search, two objects evolving at once gave different meshes than one at a
 //! time), and frames are published in lock step, so the outcome does not
 //! depend on the machine's speed.
@@ -59,7 +59,7 @@ async fn play_and_score(bag_file: &str, node_name: &str, min_f: f64) -> BTreeMap
         None,
         &[
             "pipeline.deadline_ms=0".into(),
-            "membrane.threads=1".into(),
+            "membrane.step.threads=1".into(),
             "node.diagnostics_period_ms=200".into(),
             // Lock step: the next frame is published after the test's own
             // engine has run on it, which on a loaded machine can take

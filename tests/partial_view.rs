@@ -75,7 +75,7 @@ fn the_unseen_side_stays_a_plausible_closure() {
     // 0.89–0.90 / 1.12–1.19 / 1.11–1.19, volume ratio 0.81–0.83 / 1.18–1.26 /
     // 1.21–1.28, P 0.44–0.53, R_vis 0.94–1.00 for sphere / ellipsoid /
     // rounded box. Before membrane/view.rs the back folded onto the visible
-    // shell (volume ratio 0.00). With membrane.pole_axis "shortest" (the
+    // shell (volume ratio 0.00). With membrane.init.pole_axis "shortest" (the
     // default since session 3) the ellipsoid measured depth 1.12–1.27 and
     // volume 1.22–1.53 (its third frame, a cold restart, is the 1.53): the
     // volume bound is 1.6, still far from a blown-up closure (the end-on
@@ -84,11 +84,11 @@ fn the_unseen_side_stays_a_plausible_closure() {
     // the backs sit deeper: depth 0.90–0.92 / 1.13–1.18 / 1.18–1.31, volume
     // 0.85 / 1.21–1.37 / 1.23–1.33, P 0.41–0.51, R_vis 0.95–1.00. The depth
     // bound is 1.4 since then (it was 1.3).
-    // With the mirror completion of the unseen side (membrane.view_completion).
+    // With the mirror completion of the unseen side (membrane.view.completion).
     let frames = replay(
         &["sphere", "ellipsoid", "rounded_box"],
         3,
-        &["membrane.view_completion=true"],
+        &["membrane.view.completion=mirror"],
     );
     assert_eq!(frames.len(), 9);
     for f in &frames {
@@ -109,7 +109,7 @@ fn the_unseen_side_stays_a_plausible_closure() {
             rejects most boundaries, and the unseen back stays near the deep initial \
             surface; depth ratio 2.3–2.4, volume ratio 2.1–3.1 (session 3)"]
 fn a_bottle_seen_end_on_stays_a_plausible_closure() {
-    for f in &replay(&["bottle"], 3, &["membrane.view_completion=true"]) {
+    for f in &replay(&["bottle"], 3, &["membrane.view.completion=mirror"]) {
         let s = f.score.unwrap();
         let at = format!("{} frame {}: {s:?}", f.key, f.result.frame);
         assert!((0.75..=1.4).contains(&s.depth_ratio), "{at}");

@@ -349,7 +349,7 @@ fn every_warm_frame_of_a_20000_point_sequence_reaches_the_cold_f_score_of_its_fr
     };
     sepmem::synth::sequence::write_sequence(&spec, &path, |_| {}).unwrap();
     let bag = Bag::open(&path).unwrap();
-    let cfg = config(&["pipeline.deadline_ms=0", "membrane.threads=1"]);
+    let cfg = config(&["pipeline.deadline_ms=0", "membrane.step.threads=1"]);
     let frames = sepmem::eval::replay_scored(&bag, &cfg, 1).unwrap();
     assert_eq!(frames.len(), 20);
     let mut dfs = Vec::new();

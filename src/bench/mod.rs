@@ -25,7 +25,9 @@ pub mod markdown;
 
 use crate::cloud::{Aabb, PointCloud, Vec3};
 use crate::config::{Config, ConfigError};
-use crate::membrane::{self, Budget, Membrane, MembraneConfig, MembraneError, Start};
+use crate::membrane::{
+    self, Budget, GrowthConfig, Membrane, MembraneConfig, MembraneError, Start,
+};
 use crate::mesh::TriMesh;
 use crate::metrics::{self, MetricsConfig};
 use crate::shapes::{self, ShapeError};
@@ -701,30 +703,17 @@ fn adaptive(opts: &BenchOptions, log: &mut dyn FnMut(&str)) -> Result<Adaptive, 
     let surface = sample(&gt, opts.points(), seed_for(opts.seed, "adaptive"), &name)?;
     let cloud = PointCloud::from_points(surface);
     let base = &opts.membrane;
+    let with = |grid: [usize; 2], growth: Option<GrowthConfig>| {
+        let mut cfg = base.clone();
+        cfg.init.grid = grid;
+        cfg.schedule.growth = growth;
+        cfg
+    };
+    let growth = base.schedule.growth.clone().unwrap_or_default();
     let modes: [(&str, MembraneConfig); 3] = [
-        (
-            "static 8x5",
-            MembraneConfig {
-                adaptive: false,
-                grid_start: [8, 5],
-                ..base.clone()
-            },
-        ),
-        (
-            "static 40x25",
-            MembraneConfig {
-                adaptive: false,
-                grid_start: [40, 25],
-                ..base.clone()
-            },
-        ),
-        (
-            "adaptive",
-            MembraneConfig {
-                adaptive: true,
-                ..base.clone()
-            },
-        ),
+        ("static 8x5", with([8, 5], None)),
+        ("static 40x25", with([40, 25], None)),
+        ("adaptive", with(base.init.grid, Some(growth))),
     ];
     let samples = opts.metric_samples();
     let eval_seed = seed_for(opts.seed, "eval/adaptive");
@@ -818,17 +807,15 @@ fn ablation(
             let cloud =
                 clouds::coloured_with_dark_outliers(&surface, sigma, &mut rng_for(opts.seed, &key));
             for (label, spatial, attrs) in ablation_features(opts.quick) {
-                let cfg = MembraneConfig {
-                    spatial_weight: spatial,
-                    attributes: attrs
-                        .iter()
-                        .map(|a| membrane::AttributeWeight {
-                            name: (*a).to_string(),
-                            weight: 1.0,
-                        })
-                        .collect(),
-                    ..opts.membrane.clone()
-                };
+                let mut cfg = opts.membrane.clone();
+                cfg.step.spatial_weight = spatial;
+                cfg.step.attributes = attrs
+                    .iter()
+                    .map(|a| membrane::AttributeWeight {
+                        name: (*a).to_string(),
+                        weight: 1.0,
+                    })
+                    .collect();
                 let run = run_one(
                     &cloud,
                     &Membrane::new(cfg)?,
@@ -975,10 +962,9 @@ fn speed(
     let n = opts.points();
     let surface = sample(&gt, n, seed_for(opts.seed, "speed"), name)?;
     let cloud = PointCloud::from_points(surface.clone());
-    let cfg = Membrane::new(MembraneConfig {
-        threads: 1,
-        ..opts.membrane.clone()
-    })?;
+    let mut serial = opts.membrane.clone();
+    serial.step.threads = 1;
+    let cfg = Membrane::new(serial)?;
     let repeats = if opts.quick { 3 } else { 9 };
     let mut totals = Vec::new();
     let mut reports = Vec::new();
@@ -1109,7 +1095,7 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(&str)) -> Result<BenchReport
     let mut rep = BenchReport {
         quick: opts.quick,
         seed: opts.seed,
-        threads: opts.membrane.threads,
+        threads: opts.membrane.step.threads,
         ..Default::default()
     };
     let mut skipped = Vec::new();

@@ -23,10 +23,9 @@ pub fn run(
         .with_context(|| format!("reading point cloud {}", input.display()))?;
     let read_dropped = loaded.report.dropped_non_finite;
     let mcfg = &cfg.membrane;
-    let budget = if mcfg.time_limit_ms > 0.0 {
-        Budget::within(Duration::from_secs_f64(mcfg.time_limit_ms / 1e3))
-    } else {
-        Budget::unlimited()
+    let budget = match mcfg.schedule.time_limit_ms {
+        Some(ms) => Budget::within(Duration::from_secs_f64(ms / 1e3)),
+        None => Budget::unlimited(),
     };
     let rec = reconstruct(&loaded.cloud, mcfg, &budget, None)
         .with_context(|| format!("reconstructing {}", input.display()))?;

@@ -1,6 +1,13 @@
 //! The `membrane` section of the configuration: every parameter of the
 //! separability membrane (paper §III-D/E/F) and the mechanisms this
-//! implementation adds. Documented key by key in `launch/sepmem.json5`.
+//! implementation adds, in one sub-section per module of the membrane
+//! (`prepare`, `init`, `step`, `regularize`, `fit`, `schedule`, `view`).
+//! Documented key by key in `launch/sepmem.json5`.
+//!
+//! An optional mechanism with parameters is an `Option` of its own
+//! section (`null` turns it off, e.g. `step.inward`, `schedule.growth`); a
+//! choice between methods is an enum (`prepare.search_delta`,
+//! `view.completion`). No key uses 0 to mean "off".
 //!
 //! Lengths are relative to the object size (the longest bounding-box edge of
 //! the filtered cloud) unless their name ends in `_delta` (multiples of the
@@ -25,6 +32,27 @@ pub enum PoleAxis {
     Shortest,
 }
 
+/// Which point spacing the separability search uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SearchDelta {
+    /// One global δ per cloud.
+    Global,
+    /// The local δ_R of each cuboid (paper Eq. 6).
+    Local,
+}
+
+/// How the unseen side of a single view is completed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Completion {
+    /// Not at all: the back stays at the initial surface, held where the
+    /// camera could not see.
+    None,
+    /// By mirroring the visible points (the symmetry prior of [`super::view`]).
+    Mirror,
+}
+
 /// One attribute of the weighted separability (paper Eq. 9).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -35,28 +63,68 @@ pub struct AttributeWeight {
     pub weight: f64,
 }
 
-/// Parameters of the separability membrane.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// Parameters of the separability membrane, one section per module.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MembraneConfig {
+    /// Thinning, outlier filter and point spacing δ ([`super::prepare`]).
+    pub prepare: PrepareConfig,
+    /// The initial surface and its pole axis ([`super::init`], [`super::pole`]).
+    pub init: InitConfig,
+    /// The per-sample search and shift rule ([`super::step`]).
+    pub step: StepConfig,
+    /// The regularisers of the shifts ([`super::regularize`]).
+    pub regularize: RegularizeConfig,
+    /// Sample counts and the least-squares refit ([`super::fit`]).
+    pub fit: FitConfig,
+    /// Depth decay, grid growth and stopping ([`super::schedule`]).
+    pub schedule: ScheduleConfig,
+    /// Single-view clouds ([`super::view`]).
+    pub view: ViewConfig,
+}
+
+/// `membrane.prepare`: what happens to the points before the evolution.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PrepareConfig {
     /// Thin larger clouds to at most this many points (deterministic
-    /// pseudo-random subsample) before anything else; 0 keeps every point.
-    pub max_points: usize,
+    /// pseudo-random subsample) before anything else; `None` keeps every point.
+    pub max_points: Option<usize>,
     /// k of the per-point mean k-NN distance d_i (paper Eq. 5).
     pub knn_k: usize,
     /// Drop points whose d_i exceeds this multiple of the median d_i before
-    /// anything else (0 disables the outlier filter).
-    pub outlier_factor: f64,
+    /// anything else; `None`: no outlier filter.
+    pub outlier_factor: Option<f64>,
     /// Compute d_i for at most this many points (a spread subset) and filter
-    /// outliers by voxel counts instead of per-point d_i (0: every point).
-    pub density_sample: usize,
-    /// Use the local δ_R (paper Eq. 6) in the search instead of the global δ.
-    pub local_delta: bool,
+    /// outliers by voxel counts instead of per-point d_i; `None`: every point.
+    pub density_sample: Option<usize>,
+    /// The search's δ: global, or the local δ_R of each cuboid (paper Eq. 6).
+    pub search_delta: SearchDelta,
     /// Global δ of a whole object (not a single view, which uses the
     /// median): this quantile of the kept points' d_i (0.5: the median).
     pub delta_quantile: f64,
     /// Global δ of a whole object: that quantile times this factor.
     pub delta_scale: f64,
+}
+
+impl Default for PrepareConfig {
+    fn default() -> Self {
+        Self {
+            max_points: Some(8000),
+            knn_k: 8,
+            outlier_factor: Some(2.0),
+            density_sample: None,
+            search_delta: SearchDelta::Global,
+            delta_quantile: 0.25,
+            delta_scale: 1.3,
+        }
+    }
+}
+
+/// `membrane.init`: the initial surface of a cold start.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InitConfig {
     /// Axis of the two poles.
     pub pole_axis: PoleAxis,
     /// Cold whole objects with an automatic `pole_axis`: how many pole axes
@@ -69,36 +137,34 @@ pub struct MembraneConfig {
     /// of a used point (1 = always).
     pub pole_axis_support: f64,
     /// Quantile used for the robust extreme points of the initial octagon.
-    pub init_quantile: f64,
+    pub quantile: f64,
     /// Enlargement of the initial surface beyond the smallest one enclosing every point.
-    pub init_margin: f64,
+    pub margin: f64,
     /// Initial control grid `[M, L]` (columns around, rows pole to pole).
-    pub grid_start: [usize; 2],
-    /// Largest control grid `[M, L]` reached by dynamic adjustment.
-    pub grid_max: [usize; 2],
-    /// Control columns and rows added per adjustment `[m, l]`.
-    pub grid_step: [usize; 2],
-    /// Dynamic membrane adjustment (§III-F); false keeps `grid_start` fixed.
-    pub adaptive: bool,
-    /// `div_min` of the sample count `div_n = max(div_min, α(q−1)+1)`.
-    pub div_min: usize,
-    /// `α` of the sample count formula.
-    pub alpha: f64,
-    /// `α` used when warm-started from a previous surface (fewer samples:
-    /// the surface is already close, and frames must be cheap).
-    pub alpha_warm: f64,
+    pub grid: [usize; 2],
+}
+
+impl Default for InitConfig {
+    fn default() -> Self {
+        Self {
+            pole_axis: PoleAxis::Shortest,
+            pole_axis_candidates: 2,
+            pole_axis_support: 0.99,
+            quantile: 0.002,
+            margin: 1.05,
+            grid: [8, 5],
+        }
+    }
+}
+
+/// `membrane.step`: the per-sample cuboid search and its shift rule.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StepConfig {
     /// Number of boundary positions K tried in each search cuboid.
     pub boundaries: usize,
-    /// Shift factor β (< 1) applied to each sample's move.
+    /// Shift factor β (≤ 1) applied to each sample's move.
     pub beta: f64,
-    /// Initial search depth M_d (relative to the object size).
-    pub depth_start: f64,
-    /// Initial search depth for a warm start (relative).
-    pub depth_warm: f64,
-    /// Factor applied to the depth after every iteration.
-    pub depth_decay: f64,
-    /// Depth floor, in multiples of δ.
-    pub depth_floor_delta: f64,
     /// Cross-section M_w, M_h as a multiple of the local sample spacing.
     pub cross_scale: f64,
     /// Cross-section floor, in multiples of δ.
@@ -109,16 +175,12 @@ pub struct MembraneConfig {
     pub band_inner_delta: f64,
     /// … are centred on by their median (`band_outer_delta` is `outer`).
     pub band_outer_delta: f64,
-    /// Accept a boundary only where the inner region is the denser one (μ1 ≥ μ2).
-    pub inside_denser: bool,
-    /// Smallest inner region `r1` of an accepted boundary, as a fraction of
-    /// the search depth `M_d` (0 = any boundary; needs `inside_denser`).
-    pub inner_margin: f64,
+    /// Accept a boundary only where the inner region is the denser one
+    /// (μ1 ≥ μ2); `None` accepts every boundary.
+    pub inside_denser: Option<InsideDenserConfig>,
     /// Dense-side significance: the band must hold this fraction of the
     /// expected surface count `M_w·M_h/δ²`.
     pub significance: f64,
-    /// 3×3 median filter of the per-sample shifts.
-    pub median_filter: bool,
     /// Warm-started iterations search a checkerboard half of the samples
     /// (alternating) and give the other half their neighbours' result.
     pub sparse_warm_search: bool,
@@ -126,114 +188,235 @@ pub struct MembraneConfig {
     /// objects (no single view) once the grid has reached its maximum, for
     /// clouds with at least as many points as the grid has samples.
     pub sparse_cold_search: bool,
-    /// Redistribute the samples along `u` (equal arc lengths) after a refit
-    /// when the ring stretch exceeds this ratio (0 = off; whole objects).
-    pub redistribute_stretch: f64,
-    /// Gated inward force where the occupancy grid says the sample is
-    /// outside: against the normal, or, where the normal faces the centroid,
-    /// toward the solid space its normal line meets (along it for a
-    /// folded-over pocket, against it for a sheet hanging in a cavity).
-    pub inward_force: bool,
-    /// Tension near the poles on samples without a data force: the fraction
-    /// of the normal step to their neighbours' mean they move (0 = off).
-    pub pole_tension: f64,
-    /// Sample rows next to each pole where `pole_tension` acts.
-    pub pole_tension_rows: usize,
-    /// Warm-started single views: smoothing of the occluded back without a
-    /// data force (the fraction of the mean-free umbrella step; 0 = off).
-    pub warm_back_smoothing: f64,
-    /// Voxel edge of the occupancy grid, in multiples of δ.
-    pub inward_voxel_delta: f64,
-    /// Points in a voxel's 3×3×3 neighbourhood for it to be occupied.
-    pub inward_min_points: usize,
-    /// Inward move, as a fraction of the current search depth.
-    pub inward_step: f64,
-    /// Roughness penalty weight w of the fit (`λ = w·tr(AᵀA)/n`).
-    pub roughness: f64,
-    /// Grow the control grid when the gain of η_g falls below this (g_min).
-    pub g_min: f64,
-    /// Minimum iterations on a grid before it may grow again.
-    pub grow_after: usize,
-    /// Plateau: |Δη_g| below this …
-    pub plateau_eps: f64,
-    /// … for this many consecutive iterations on the final grid stops.
-    pub plateau_patience: usize,
-    /// Hard cap on iterations.
-    pub max_iterations: usize,
-    /// Wall-clock budget per reconstruction in ms used by the CLI (0 = none).
-    pub time_limit_ms: f64,
+    /// The gated inward force where the occupancy grid says the sample is
+    /// outside; `None` turns it off.
+    pub inward: Option<InwardConfig>,
     /// Weight of the point separability η_p in the weighted mean (Eq. 9).
     pub spatial_weight: f64,
     /// Attribute separabilities and weights (empty = spatial only).
     pub attributes: Vec<AttributeWeight>,
     /// Worker threads for the per-sample search (0 = all cores, 1 = serial).
     pub threads: usize,
-    /// Sensor position for single-view clouds: `"auto"` (the frame origin
-    /// when the cloud is one layer seen from it), `"none"`, or `[x, y, z]`.
-    pub viewpoint: super::view::Viewpoint,
-    /// Complete the unseen side of a single view by the mirror prior.
-    pub view_completion: bool,
 }
 
-impl Default for MembraneConfig {
+impl Default for StepConfig {
     fn default() -> Self {
         Self {
-            max_points: 8000,
-            knn_k: 8,
-            outlier_factor: 2.0,
-            density_sample: 0,
-            local_delta: false,
-            delta_quantile: 0.25,
-            delta_scale: 1.3,
-            pole_axis: PoleAxis::Shortest,
-            pole_axis_candidates: 2,
-            pole_axis_support: 0.99,
-            init_quantile: 0.002,
-            init_margin: 1.05,
-            grid_start: [8, 5],
-            grid_max: [40, 25],
-            grid_step: [8, 5],
-            adaptive: true,
-            div_min: 24,
-            alpha: 2.0,
-            alpha_warm: 1.5,
             boundaries: 30,
             beta: 0.9,
-            depth_start: 0.3,
-            depth_warm: 0.08,
-            depth_decay: 0.85,
-            depth_floor_delta: 4.0,
             cross_scale: 1.0,
             cross_min_delta: 3.0,
             cross_max: 0.1,
             band_inner_delta: 2.0,
             band_outer_delta: 1.0,
-            inside_denser: true,
-            inner_margin: 0.25,
+            inside_denser: Some(InsideDenserConfig::default()),
             significance: 0.3,
-            median_filter: true,
             sparse_warm_search: true,
             sparse_cold_search: true,
-            redistribute_stretch: 1.3,
-            inward_force: true,
-            pole_tension: 1.0,
-            pole_tension_rows: 6,
-            warm_back_smoothing: 0.5,
-            inward_voxel_delta: 2.0,
-            inward_min_points: 20,
-            inward_step: 0.5,
-            roughness: 1e-2,
-            g_min: 0.01,
-            grow_after: 2,
-            plateau_eps: 1e-3,
-            plateau_patience: 3,
-            max_iterations: 60,
-            time_limit_ms: 0.0,
+            inward: Some(InwardConfig::default()),
             spatial_weight: 1.0,
             attributes: Vec::new(),
             threads: 0,
+        }
+    }
+}
+
+/// `membrane.step.inside_denser`: the inner-side-denser boundary rule.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InsideDenserConfig {
+    /// Smallest inner region `r1` of an accepted boundary, as a fraction of
+    /// the search depth `M_d` (0 = any boundary with a denser inside).
+    pub inner_margin: f64,
+}
+
+impl Default for InsideDenserConfig {
+    fn default() -> Self {
+        Self { inner_margin: 0.25 }
+    }
+}
+
+/// `membrane.step.inward`: the gated inward force. Where the occupancy grid
+/// says the sample is outside: against the normal, or, where the normal
+/// faces the centroid, toward the solid space its normal line meets (along
+/// it for a folded-over pocket, against it for a sheet hanging in a cavity).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InwardConfig {
+    /// Voxel edge of the occupancy grid, in multiples of δ.
+    pub voxel_delta: f64,
+    /// Points in a voxel's 3×3×3 neighbourhood for it to be occupied.
+    pub min_points: usize,
+    /// Inward shift, as a fraction of the current search depth.
+    pub shift: f64,
+}
+
+impl Default for InwardConfig {
+    fn default() -> Self {
+        Self {
+            voxel_delta: 2.0,
+            min_points: 20,
+            shift: 0.5,
+        }
+    }
+}
+
+/// `membrane.regularize`: what happens to the shifts before the refit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegularizeConfig {
+    /// 3×3 median filter of the per-sample shifts.
+    pub median_filter: bool,
+    /// Tension near the poles on samples without a data force (whole
+    /// objects); `None` turns it off.
+    pub pole_tension: Option<PoleTensionConfig>,
+    /// Warm-started single views: smoothing of the occluded back without a
+    /// data force (the fraction of the mean-free umbrella step); `None`
+    /// turns it off.
+    pub warm_back_smoothing: Option<f64>,
+}
+
+impl Default for RegularizeConfig {
+    fn default() -> Self {
+        Self {
+            median_filter: true,
+            pole_tension: Some(PoleTensionConfig::default()),
+            warm_back_smoothing: Some(0.5),
+        }
+    }
+}
+
+/// `membrane.regularize.pole_tension`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoleTensionConfig {
+    /// The fraction of the normal step to their neighbours' mean the samples move.
+    pub strength: f64,
+    /// Sample rows next to each pole where it acts.
+    pub rows: usize,
+}
+
+impl Default for PoleTensionConfig {
+    fn default() -> Self {
+        Self {
+            strength: 1.0,
+            rows: 6,
+        }
+    }
+}
+
+/// `membrane.fit`: the sample counts of Eq. 14 and the least-squares refit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FitConfig {
+    /// `div_min` of the sample count `div_n = max(div_min, α(q−1)+1)`.
+    pub div_min: usize,
+    /// `α` of the sample count formula.
+    pub alpha: f64,
+    /// `α` used when warm-started from a previous surface (fewer samples:
+    /// the surface is already close, and frames must be cheap).
+    pub alpha_warm: f64,
+    /// Roughness penalty weight w of the fit (`λ = w·tr(AᵀA)/n`).
+    pub roughness: f64,
+    /// Redistribute the samples along `u` (equal arc lengths) after a refit
+    /// when the ring stretch exceeds this ratio (whole objects); `None`
+    /// turns it off.
+    pub redistribute_stretch: Option<f64>,
+}
+
+impl Default for FitConfig {
+    fn default() -> Self {
+        Self {
+            div_min: 24,
+            alpha: 2.0,
+            alpha_warm: 1.5,
+            roughness: 1e-2,
+            redistribute_stretch: Some(1.3),
+        }
+    }
+}
+
+/// `membrane.schedule`: dynamic membrane adjustment (§III-F) and stopping.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScheduleConfig {
+    /// Initial search depth M_d (relative to the object size).
+    pub depth_start: f64,
+    /// Initial search depth for a warm start (relative).
+    pub depth_warm: f64,
+    /// Factor applied to the depth after every iteration.
+    pub depth_decay: f64,
+    /// Depth floor, in multiples of δ.
+    pub depth_floor_delta: f64,
+    /// Growth of the control grid; `None` keeps `init.grid` fixed.
+    pub growth: Option<GrowthConfig>,
+    /// Plateau: |Δη_g| below this …
+    pub plateau_eps: f64,
+    /// … for this many consecutive iterations on the final grid stops.
+    pub plateau_patience: usize,
+    /// Hard cap on iterations.
+    pub max_iterations: usize,
+    /// Wall-clock budget per reconstruction in ms used by the CLI; `None`: none.
+    pub time_limit_ms: Option<f64>,
+}
+
+impl Default for ScheduleConfig {
+    fn default() -> Self {
+        Self {
+            depth_start: 0.3,
+            depth_warm: 0.08,
+            depth_decay: 0.85,
+            depth_floor_delta: 4.0,
+            growth: Some(GrowthConfig::default()),
+            plateau_eps: 1e-3,
+            plateau_patience: 3,
+            max_iterations: 60,
+            time_limit_ms: None,
+        }
+    }
+}
+
+/// `membrane.schedule.growth`: the control grid grows when η_g stops gaining.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GrowthConfig {
+    /// Largest control grid `[M, L]`.
+    pub grid_max: [usize; 2],
+    /// Control columns and rows added per adjustment `[m, l]`.
+    pub grid_step: [usize; 2],
+    /// Grow when the gain of η_g falls below this (g_min).
+    pub g_min: f64,
+    /// Minimum iterations on a grid before it may grow again.
+    pub grow_after: usize,
+}
+
+impl Default for GrowthConfig {
+    fn default() -> Self {
+        Self {
+            grid_max: [40, 25],
+            grid_step: [8, 5],
+            g_min: 0.01,
+            grow_after: 2,
+        }
+    }
+}
+
+/// `membrane.view`: single-view clouds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ViewConfig {
+    /// Sensor position for single-view clouds: `"auto"` (the frame origin
+    /// when the cloud is one layer seen from it), `"none"`, or `[x, y, z]`.
+    pub viewpoint: super::view::Viewpoint,
+    /// How the unseen side of a single view is completed.
+    pub completion: Completion,
+}
+
+impl Default for ViewConfig {
+    fn default() -> Self {
+        Self {
             viewpoint: super::view::Viewpoint::Mode(super::view::ViewMode::Auto),
-            view_completion: false,
+            completion: Completion::None,
         }
     }
 }
@@ -242,7 +425,7 @@ impl Default for MembraneConfig {
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 #[error("membrane config: `{key}` {problem}")]
 pub struct ConfigError {
-    /// Parameter name.
+    /// Dotted key within the `membrane` section (e.g. `step.beta`).
     pub key: &'static str,
     /// What is wrong with it.
     pub problem: String,
@@ -258,54 +441,13 @@ impl ConfigError {
     }
 }
 
-/// Check every parameter's range.
-///
-/// # Errors
-/// [`ConfigError`] naming the first bad key.
-pub fn validate(cfg: &MembraneConfig) -> Result<(), ConfigError> {
-    let bad = |key: &'static str, problem: &str| Err(ConfigError::new(key, problem));
-    let pos = |x: f64| x > 0.0 && x.is_finite();
-    if cfg.knn_k == 0 {
-        return bad("knn_k", "must be at least 1");
+/// `Err` naming `key` and `problem` unless `ok`.
+fn check(ok: bool, key: &'static str, problem: &str) -> Result<(), ConfigError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ConfigError::new(key, problem))
     }
-    if cfg.outlier_factor.is_nan() || cfg.outlier_factor < 0.0 {
-        return bad("outlier_factor", "must be >= 0");
-    }
-    if cfg.grid_start[0] < 4 || cfg.grid_start[1] < 4 {
-        return bad("grid_start", "needs M >= 4 and L >= 4");
-    }
-    if cfg.grid_max[0] < cfg.grid_start[0] || cfg.grid_max[1] < cfg.grid_start[1] {
-        return bad("grid_max", "must be at least grid_start");
-    }
-    if cfg.adaptive && cfg.grid_step[0] == 0 && cfg.grid_step[1] == 0 {
-        return bad("grid_step", "must add at least one column or row");
-    }
-    if cfg.div_min < 4 {
-        return bad("div_min", "must be at least 4");
-    }
-    if !pos(cfg.alpha) {
-        return bad("alpha", "must be positive");
-    }
-    if !pos(cfg.alpha_warm) {
-        return bad("alpha_warm", "must be positive");
-    }
-    if cfg.boundaries == 0 {
-        return bad("boundaries", "must be at least 1");
-    }
-    if cfg.beta.is_nan() || cfg.beta <= 0.0 || cfg.beta > 1.0 {
-        return bad("beta", "must be in (0, 1]");
-    }
-    let lengths = [
-        ("depth_start", cfg.depth_start),
-        ("depth_warm", cfg.depth_warm),
-        ("depth_floor_delta", cfg.depth_floor_delta),
-        ("cross_scale", cfg.cross_scale),
-        ("cross_min_delta", cfg.cross_min_delta),
-        ("cross_max", cfg.cross_max),
-        ("inward_voxel_delta", cfg.inward_voxel_delta),
-    ];
-    check_each(&lengths, pos, "must be a positive length")?;
-    validate_mechanisms(cfg)
 }
 
 /// The first of `keys` whose value fails `ok`, as a [`ConfigError`] saying `problem`.
@@ -320,64 +462,219 @@ fn check_each(
     }
 }
 
-/// The second half of [`validate`]: the mechanisms' and the schedule's keys.
-fn validate_mechanisms(cfg: &MembraneConfig) -> Result<(), ConfigError> {
-    let bad = |key: &'static str, problem: &str| Err(ConfigError::new(key, problem));
-    let pos = |x: f64| x > 0.0 && x.is_finite();
-    if !(cfg.pole_tension >= 0.0 && cfg.pole_tension <= 1.0) {
-        return bad("pole_tension", "must be in [0, 1]");
-    }
-    if !(1..=3).contains(&cfg.pole_axis_candidates) {
-        return bad("pole_axis_candidates", "must be 1, 2 or 3");
-    }
-    if !(cfg.pole_axis_support >= 0.0 && cfg.pole_axis_support <= 1.0) {
-        return bad("pole_axis_support", "must be in [0, 1]");
-    }
-    if !(cfg.redistribute_stretch == 0.0
-        || (cfg.redistribute_stretch > 1.0 && cfg.redistribute_stretch.is_finite()))
-    {
-        return bad("redistribute_stretch", "must be 0 (off) or above 1");
-    }
-    if !(cfg.warm_back_smoothing >= 0.0 && cfg.warm_back_smoothing <= 1.0) {
-        return bad("warm_back_smoothing", "must be in [0, 1]");
-    }
-    if !(cfg.inner_margin >= 0.0 && cfg.inner_margin < 0.5) {
-        return bad("inner_margin", "must be in [0, 0.5)");
-    }
-    if !(cfg.depth_decay > 0.0 && cfg.depth_decay <= 1.0) {
-        return bad("depth_decay", "must be in (0, 1]");
-    }
-    let non_negative = [
-        ("band_inner_delta", cfg.band_inner_delta),
-        ("band_outer_delta", cfg.band_outer_delta),
-        ("significance", cfg.significance),
-        ("inward_step", cfg.inward_step),
-        ("roughness", cfg.roughness),
-        ("g_min", cfg.g_min),
-        ("plateau_eps", cfg.plateau_eps),
-        ("time_limit_ms", cfg.time_limit_ms),
-        ("init_quantile", cfg.init_quantile),
-        ("spatial_weight", cfg.spatial_weight),
+/// A positive, finite value.
+fn pos(x: f64) -> bool {
+    x > 0.0 && x.is_finite()
+}
+
+/// A finite value ≥ 0.
+fn non_negative(x: f64) -> bool {
+    x >= 0.0 && x.is_finite()
+}
+
+/// Check every parameter's range.
+///
+/// # Errors
+/// [`ConfigError`] naming the first bad key (dotted within `membrane`).
+pub fn validate(cfg: &MembraneConfig) -> Result<(), ConfigError> {
+    validate_prepare(&cfg.prepare)?;
+    validate_init(&cfg.init)?;
+    validate_step(&cfg.step)?;
+    validate_regularize(&cfg.regularize)?;
+    validate_fit(&cfg.fit)?;
+    validate_schedule(&cfg.schedule, cfg.init.grid)
+}
+
+fn validate_prepare(p: &PrepareConfig) -> Result<(), ConfigError> {
+    check(
+        p.max_points != Some(0),
+        "prepare.max_points",
+        "must be at least 1 (null keeps every point)",
+    )?;
+    check(p.knn_k > 0, "prepare.knn_k", "must be at least 1")?;
+    check(
+        p.outlier_factor.is_none_or(|f| f > 0.0),
+        "prepare.outlier_factor",
+        "must be positive (null turns the filter off)",
+    )?;
+    check(
+        p.density_sample != Some(0),
+        "prepare.density_sample",
+        "must be at least 1 (null: every point)",
+    )?;
+    check(
+        p.delta_quantile > 0.0 && p.delta_quantile <= 1.0,
+        "prepare.delta_quantile",
+        "must be in (0, 1]",
+    )?;
+    check(pos(p.delta_scale), "prepare.delta_scale", "must be positive")
+}
+
+fn validate_init(i: &InitConfig) -> Result<(), ConfigError> {
+    check(
+        i.grid[0] >= 4 && i.grid[1] >= 4,
+        "init.grid",
+        "needs M >= 4 and L >= 4",
+    )?;
+    check(
+        (1..=3).contains(&i.pole_axis_candidates),
+        "init.pole_axis_candidates",
+        "must be 1, 2 or 3",
+    )?;
+    check(
+        (0.0..=1.0).contains(&i.pole_axis_support),
+        "init.pole_axis_support",
+        "must be in [0, 1]",
+    )?;
+    check(
+        non_negative(i.quantile) && i.quantile < 0.5,
+        "init.quantile",
+        "must be in [0, 0.5)",
+    )?;
+    check(
+        i.margin >= 1.0 && i.margin.is_finite(),
+        "init.margin",
+        "must be >= 1",
+    )
+}
+
+fn validate_step(s: &StepConfig) -> Result<(), ConfigError> {
+    check(s.boundaries > 0, "step.boundaries", "must be at least 1")?;
+    check(
+        s.beta > 0.0 && s.beta <= 1.0,
+        "step.beta",
+        "must be in (0, 1]",
+    )?;
+    let lengths = [
+        ("step.cross_scale", s.cross_scale),
+        ("step.cross_min_delta", s.cross_min_delta),
+        ("step.cross_max", s.cross_max),
+        (
+            "step.inward.voxel_delta",
+            s.inward.as_ref().map_or(1.0, |w| w.voxel_delta),
+        ),
     ];
-    check_each(
-        &non_negative,
-        |v| v >= 0.0 && v.is_finite(),
+    check_each(&lengths, pos, "must be a positive length")?;
+    let margin = s.inside_denser.as_ref().map_or(0.0, |d| d.inner_margin);
+    check(
+        (0.0..0.5).contains(&margin),
+        "step.inside_denser.inner_margin",
+        "must be in [0, 0.5)",
+    )?;
+    let finite = [
+        ("step.band_inner_delta", s.band_inner_delta),
+        ("step.band_outer_delta", s.band_outer_delta),
+        ("step.significance", s.significance),
+        ("step.inward.shift", s.inward.as_ref().map_or(0.0, |w| w.shift)),
+        ("step.spatial_weight", s.spatial_weight),
+    ];
+    check_each(&finite, non_negative, "must be a finite value >= 0")
+}
+
+fn validate_regularize(r: &RegularizeConfig) -> Result<(), ConfigError> {
+    let in_unit = |x: f64| x > 0.0 && x <= 1.0;
+    check(
+        r.pole_tension.as_ref().is_none_or(|t| in_unit(t.strength)),
+        "regularize.pole_tension.strength",
+        "must be in (0, 1] (null turns the tension off)",
+    )?;
+    check(
+        r.warm_back_smoothing.is_none_or(in_unit),
+        "regularize.warm_back_smoothing",
+        "must be in (0, 1] (null turns it off)",
+    )
+}
+
+fn validate_fit(f: &FitConfig) -> Result<(), ConfigError> {
+    check(f.div_min >= 4, "fit.div_min", "must be at least 4")?;
+    check(pos(f.alpha), "fit.alpha", "must be positive")?;
+    check(pos(f.alpha_warm), "fit.alpha_warm", "must be positive")?;
+    check(
+        non_negative(f.roughness),
+        "fit.roughness",
         "must be a finite value >= 0",
     )?;
-    if !(cfg.delta_quantile > 0.0 && cfg.delta_quantile <= 1.0) {
-        return bad("delta_quantile", "must be in (0, 1]");
+    check(
+        f.redistribute_stretch
+            .is_none_or(|s| s > 1.0 && s.is_finite()),
+        "fit.redistribute_stretch",
+        "must be above 1 (null turns it off)",
+    )
+}
+
+fn validate_schedule(s: &ScheduleConfig, grid: [usize; 2]) -> Result<(), ConfigError> {
+    let lengths = [
+        ("schedule.depth_start", s.depth_start),
+        ("schedule.depth_warm", s.depth_warm),
+        ("schedule.depth_floor_delta", s.depth_floor_delta),
+    ];
+    check_each(&lengths, pos, "must be a positive length")?;
+    check(
+        s.depth_decay > 0.0 && s.depth_decay <= 1.0,
+        "schedule.depth_decay",
+        "must be in (0, 1]",
+    )?;
+    if let Some(g) = &s.growth {
+        validate_growth(g, grid)?;
     }
-    if !pos(cfg.delta_scale) {
-        return bad("delta_scale", "must be positive");
+    check(
+        non_negative(s.plateau_eps),
+        "schedule.plateau_eps",
+        "must be a finite value >= 0",
+    )?;
+    check(
+        s.max_iterations > 0,
+        "schedule.max_iterations",
+        "must be at least 1",
+    )?;
+    check(
+        s.time_limit_ms.is_none_or(pos),
+        "schedule.time_limit_ms",
+        "must be positive (null: no limit)",
+    )
+}
+
+fn validate_growth(g: &GrowthConfig, grid: [usize; 2]) -> Result<(), ConfigError> {
+    check(
+        g.grid_max[0] >= grid[0] && g.grid_max[1] >= grid[1],
+        "schedule.growth.grid_max",
+        "must be at least init.grid",
+    )?;
+    check(
+        g.grid_step != [0, 0],
+        "schedule.growth.grid_step",
+        "must add at least one column or row",
+    )?;
+    check(
+        non_negative(g.g_min),
+        "schedule.growth.g_min",
+        "must be a finite value >= 0",
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid() {
+        validate(&MembraneConfig::default()).unwrap();
     }
-    if cfg.init_quantile >= 0.5 {
-        return bad("init_quantile", "must be below 0.5");
+
+    #[test]
+    fn errors_name_the_dotted_key() {
+        let mut cfg = MembraneConfig::default();
+        cfg.fit.alpha = 0.0;
+        assert_eq!(validate(&cfg).unwrap_err().key, "fit.alpha");
+        let mut cfg = MembraneConfig::default();
+        cfg.prepare.outlier_factor = Some(0.0);
+        let err = validate(&cfg).unwrap_err();
+        assert_eq!(err.key, "prepare.outlier_factor");
+        assert!(err.to_string().contains("null"), "{err}");
+        let mut cfg = MembraneConfig::default();
+        cfg.init.grid = [48, 30];
+        assert_eq!(validate(&cfg).unwrap_err().key, "schedule.growth.grid_max");
+        cfg.schedule.growth = None;
+        validate(&cfg).unwrap();
     }
-    if !(cfg.init_margin >= 1.0 && cfg.init_margin.is_finite()) {
-        return bad("init_margin", "must be >= 1");
-    }
-    if cfg.max_iterations == 0 {
-        return bad("max_iterations", "must be at least 1");
-    }
-    Ok(())
 }

@@ -10,14 +10,14 @@
 //! of the per-sample accepted maxima `η*`.
 //!
 //! Whole objects redistribute their samples along the rings
-//! (`redistribute_stretch`): the sample grid is fixed in `(u, v)`, so where
+//! (`fit.redistribute_stretch`): the sample grid is fixed in `(u, v)`, so where
 //! the membrane stretches (a sheet pushed into a cavity whose opening lies
 //! across the rings) its samples and control columns thin out and the sheet
 //! stalls in a coarse V. When a ring's largest arc length per unit `u`
-//! exceeds `redistribute_stretch` × its mean, the refitted surface is
+//! exceeds `fit.redistribute_stretch` × its mean, the refitted surface is
 //! refitted once more to itself at the arc-length parameters.
 
-use super::config::MembraneConfig;
+use super::config::{MembraneConfig, SearchDelta};
 use super::extract::extract_mesh;
 use super::fit::Fits;
 use super::prepare::Prepared;
@@ -32,28 +32,27 @@ use crate::separability::search::{Delta, Searcher};
 use crate::spline::{param_stretch, redistribute, regrid, ClosedSurface, FitSystem};
 use std::time::Instant;
 
-/// Rings over which the ring stretch of `redistribute_stretch` is averaged.
+/// Rings over which the ring stretch of `fit.redistribute_stretch` is averaged.
 const STRETCH_RINGS: usize = 16;
 
 /// The per-sample search over prepared points.
 fn stepper<'a>(prep: &'a Prepared, cfg: &'a MembraneConfig) -> Result<Stepper<'a>, MembraneError> {
-    let delta = if cfg.local_delta {
-        Delta::Local(&prep.d_used)
-    } else {
-        Delta::Global(prep.delta)
+    let delta = match cfg.prepare.search_delta {
+        SearchDelta::Local => Delta::Local(&prep.d_used),
+        SearchDelta::Global => Delta::Global(prep.delta),
     };
-    let searcher = Searcher::new(&prep.index, delta, cfg.boundaries)?;
+    let searcher = Searcher::new(&prep.index, delta, cfg.step.boundaries)?;
     let searcher = match &prep.attributes {
         Some(a) => searcher.with_attributes(a)?,
         None => searcher,
     };
     Ok(Stepper {
-        cfg,
+        cfg: &cfg.step,
         searcher,
         delta: prep.delta,
         outside: prep.outside.as_ref(),
         view: prep.view.as_ref(),
-        cross_max: cfg.cross_max * prep.scale,
+        cross_max: cfg.step.cross_max * prep.scale,
         center: prep.points.iter().sum::<Vec3>() / prep.points.len() as f64,
         reach: prep.scale,
     })
@@ -89,20 +88,21 @@ pub(crate) fn evolve(
 ) -> Result<Reconstruction, MembraneError> {
     let t_start = Instant::now();
     let t_init = Instant::now();
-    let (mut surface, pole_axis) = init::initial(&prep.points, cfg, warm, pole, fits)?;
+    let (mut surface, pole_axis) = init::initial(&prep.points, &cfg.init, warm, pole, fits)?;
     let mut times = PhaseTimes {
         prepare_ms: prep.prepare_ms,
         init_ms: ms(t_init),
         ..PhaseTimes::default()
     };
     let stepper = stepper(prep, cfg)?;
-    let floor = cfg.depth_floor_delta * prep.delta;
+    let sc = &cfg.schedule;
+    let floor = sc.depth_floor_delta * prep.delta;
     let depth = if warm.is_some() {
-        cfg.depth_warm
+        sc.depth_warm
     } else {
-        cfg.depth_start
+        sc.depth_start
     } * prep.scale;
-    let mut schedule = Schedule::new(cfg, budget, depth, floor, [surface.m(), surface.l()]);
+    let mut schedule = Schedule::new(sc, budget, depth, floor, [surface.m(), surface.l()]);
     let chunks = 4 * rayon::current_num_threads().max(1);
     let mut b = Buffers {
         scratches: (0..chunks).map(|_| ThreadScratch::default()).collect(),
@@ -122,9 +122,9 @@ pub(crate) fn evolve(
         // alternating from iteration to iteration (and frame to frame); for
         // warm starts, and for whole objects on the final grid.
         let sparse = if warm.is_some() {
-            cfg.sparse_warm_search
+            cfg.step.sparse_warm_search
         } else {
-            cfg.sparse_cold_search
+            cfg.step.sparse_cold_search
                 && prep.view.is_none()
                 && schedule.at_max_grid([m, l])
                 && prep.points.len() >= layout.len()
@@ -199,13 +199,13 @@ fn move_and_refit(
         vn,
     };
     let view = prep.view.as_ref();
-    regularize::shifts(cfg, samples, view, warm, &mut b.regularize, &mut b.shifts);
+    regularize::shifts(&cfg.regularize, samples, view, warm, &mut b.regularize, &mut b.shifts);
     b.targets.clear();
     b.targets.extend(
         b.outs
             .iter()
             .zip(&b.shifts)
-            .map(|(o, &s)| o.p + o.n * (cfg.beta * s)),
+            .map(|(o, &s)| o.p + o.n * (cfg.step.beta * s)),
     );
     times.search_ms += ms(t_reg);
     let t_fit = Instant::now();
@@ -215,9 +215,9 @@ fn move_and_refit(
     fit.fit(surface, &b.targets)?;
     // Sample redistribution along the rings (whole objects): equal u steps
     // become equal arc lengths when the rings have stretched.
-    if cfg.redistribute_stretch > 0.0 && view.is_none() {
+    if let (Some(limit), None) = (cfg.fit.redistribute_stretch, view) {
         let stretch = param_stretch(surface, true, STRETCH_RINGS, 2 * un, &mut b.arc);
-        if stretch > cfg.redistribute_stretch {
+        if stretch > limit {
             *surface = redistribute(surface, fit, true, &b.arc)?;
             // The searched η* belong to the samples before the move.
             b.last_eta_grid = [0, 0];

@@ -9,7 +9,7 @@
 //! frame, so after the first frames no frame factors anything — and
 //! [`Fits`] is one reconstruction's view of it.
 
-use super::config::MembraneConfig;
+use super::config::FitConfig;
 use super::MembraneError;
 use crate::spline::{FitSystem, Layout};
 use std::collections::HashMap;
@@ -17,7 +17,7 @@ use std::sync::Mutex;
 
 /// Sample counts `(u_n, v_n)` for an `M × L` grid sampled with `alpha`
 /// (paper Eq. 14: `div_n = max(div_min, α(q−1)+1)`).
-pub fn sample_counts(cfg: &MembraneConfig, alpha: f64, m: usize, l: usize) -> (usize, usize) {
+pub fn sample_counts(cfg: &FitConfig, alpha: f64, m: usize, l: usize) -> (usize, usize) {
     let div = |q: usize| -> usize {
         let d = (alpha * (q as f64 - 1.0) + 1.0).round() as usize;
         d.max(cfg.div_min)
@@ -41,7 +41,7 @@ pub struct FitCache {
 }
 
 impl FitCache {
-    fn key(cfg: &MembraneConfig, alpha: f64, m: usize, l: usize) -> FitKey {
+    fn key(cfg: &FitConfig, alpha: f64, m: usize, l: usize) -> FitKey {
         let (un, vn) = sample_counts(cfg, alpha, m, l);
         (m, l, un, vn, cfg.roughness.to_bits())
     }
@@ -61,7 +61,7 @@ impl FitCache {
     /// [`MembraneError`] when the grid is invalid or the system singular.
     pub fn get(
         &self,
-        cfg: &MembraneConfig,
+        cfg: &FitConfig,
         alpha: f64,
         m: usize,
         l: usize,
@@ -83,7 +83,7 @@ impl FitCache {
     }
 
     /// Whether the system of an `m × l` grid sampled with `alpha` is cached.
-    pub fn contains(&self, cfg: &MembraneConfig, alpha: f64, m: usize, l: usize) -> bool {
+    pub fn contains(&self, cfg: &FitConfig, alpha: f64, m: usize, l: usize) -> bool {
         self.lookup(&Self::key(cfg, alpha, m, l)).is_some()
     }
 }
@@ -91,16 +91,16 @@ impl FitCache {
 /// One reconstruction's fit systems, one per control grid, filled from a
 /// [`FitCache`].
 pub(crate) struct Fits<'a> {
-    cfg: &'a MembraneConfig,
+    cfg: &'a FitConfig,
     cache: &'a FitCache,
-    /// `α` of the sample counts (`alpha`, or `alpha_warm` for a warm start).
+    /// `α` of the sample counts (`fit.alpha`, or `fit.alpha_warm` for a warm start).
     pub(crate) alpha: f64,
     map: HashMap<(usize, usize), FitSystem>,
 }
 
 impl<'a> Fits<'a> {
     /// Fits sampled with `alpha`, drawn from `cache`.
-    pub(crate) fn new(cfg: &'a MembraneConfig, cache: &'a FitCache, alpha: f64) -> Self {
+    pub(crate) fn new(cfg: &'a FitConfig, cache: &'a FitCache, alpha: f64) -> Self {
         Self {
             cfg,
             cache,

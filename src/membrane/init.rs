@@ -11,7 +11,7 @@
 //! every point (times a margin) and the control net is fitted by least
 //! squares to samples of this solid.
 
-use super::config::{MembraneConfig, PoleAxis};
+use super::config::{InitConfig, PoleAxis};
 use super::fit::Fits;
 use super::{MembraneError, WarmStart};
 use crate::cloud::Vec3;
@@ -126,7 +126,7 @@ pub fn octagon(
 /// `None`: the configured `pole_axis`).
 pub(crate) fn initial(
     points: &[Vec3],
-    cfg: &MembraneConfig,
+    cfg: &InitConfig,
     warm: Option<&WarmStart>,
     pole: Option<usize>,
     fits: &mut Fits<'_>,
@@ -138,13 +138,13 @@ pub(crate) fn initial(
         let axis = (b - a).abs().imax();
         return Ok((s, axis));
     }
-    let pole_axis = pole.unwrap_or_else(|| pole_axis_of(points, cfg.pole_axis, cfg.init_quantile));
-    let [m, l] = cfg.grid_start;
+    let pole_axis = pole.unwrap_or_else(|| pole_axis_of(points, cfg.pole_axis, cfg.quantile));
+    let [m, l] = cfg.grid;
     let surface = octagon(
         points,
         [PoleAxis::X, PoleAxis::Y, PoleAxis::Z][pole_axis],
-        cfg.init_quantile,
-        cfg.init_margin,
+        cfg.quantile,
+        cfg.margin,
         fits.get(m, l)?,
     )?;
     Ok((surface, pole_axis))

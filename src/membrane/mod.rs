@@ -43,7 +43,11 @@ pub mod schedule;
 pub mod step;
 pub mod view;
 
-pub use config::{AttributeWeight, ConfigError, MembraneConfig, PoleAxis};
+pub use config::{
+    AttributeWeight, Completion, ConfigError, FitConfig, GrowthConfig, InitConfig,
+    InsideDenserConfig, InwardConfig, MembraneConfig, PoleAxis, PoleTensionConfig, PrepareConfig,
+    RegularizeConfig, ScheduleConfig, SearchDelta, StepConfig, ViewConfig,
+};
 pub use extract::{extract_mesh, SEPARABILITY_CHANNEL};
 
 use crate::cloud::{CloudError, PointCloud};
@@ -77,7 +81,7 @@ pub enum MembraneError {
     #[error(transparent)]
     Config(#[from] ConfigError),
     /// An attribute named in the config is not carried by the cloud.
-    #[error("membrane: attribute `{0}` named in membrane.attributes is not in the input cloud")]
+    #[error("membrane: attribute `{0}` named in membrane.step.attributes is not in the input cloud")]
     MissingAttribute(String),
     /// An internal invariant did not hold (a bug, reported instead of a panic).
     #[error("membrane internal error: {0}")]
@@ -127,7 +131,7 @@ pub struct WarmStart {
     /// The surface to continue from (its grid size is kept).
     pub surface: ClosedSurface,
     /// Which checkerboard half of the samples the first iteration searches
-    /// when `membrane.sparse_warm_search` is on (its parity; consecutive
+    /// when `membrane.step.sparse_warm_search` is on (its parity; consecutive
     /// frames pass consecutive values so both halves take turns).
     pub phase: usize,
 }
@@ -138,7 +142,7 @@ pub struct WarmStart {
 pub enum StopReason {
     /// η_g reached a plateau on the final grid.
     Converged,
-    /// The configuration's `max_iterations` was reached.
+    /// The configuration's `schedule.max_iterations` was reached.
     MaxIterations,
     /// The caller's iteration budget was used up.
     IterationBudget,
@@ -171,7 +175,7 @@ pub struct PhaseTimes {
     /// Final scoring pass and mesh extraction.
     pub mesh_ms: f64,
     /// Evolutions along other pole axes that were tried and not kept
-    /// (`pole_axis_candidates`; they share the preparation).
+    /// (`init.pole_axis_candidates`; they share the preparation).
     pub other_axes_ms: f64,
     /// Everything.
     pub total_ms: f64,
@@ -186,7 +190,7 @@ pub struct Report {
     pub points_non_finite: usize,
     /// Exact repeats of an earlier point, dropped.
     pub points_duplicate: usize,
-    /// Points left out by the `max_points` subsample.
+    /// Points left out by the `prepare.max_points` subsample.
     pub points_thinned: usize,
     /// Points dropped by the k-NN outlier filter.
     pub points_outliers: usize,
@@ -197,7 +201,7 @@ pub struct Report {
     /// The viewpoint used (given or detected), if any.
     pub viewpoint: Option<[f64; 3]>,
     /// Global point spacing δ in input units: the median k-NN distance d_i
-    /// for a single view, `delta_scale` × the `delta_quantile` of the d_i
+    /// for a single view, `prepare.delta_scale` × the `prepare.delta_quantile` of the d_i
     /// for a whole object.
     pub delta: f64,
     /// Object size (longest bounding-box edge of the used points) in input units.
@@ -225,7 +229,7 @@ pub struct Report {
     /// Coordinate axis (0 = x, 1 = y, 2 = z) of the initial surface's poles
     /// (for a warm start, the axis nearest the line through its poles).
     pub pole_axis: usize,
-    /// Pole axes tried (`pole_axis_candidates`; 1 when only one ran).
+    /// Pole axes tried (`init.pole_axis_candidates`; 1 when only one ran).
     pub pole_axes_tried: usize,
     /// Time per phase.
     pub times: PhaseTimes,
@@ -256,7 +260,7 @@ impl Reconstruction {
 #[derive(Debug, Clone, PartialEq, Default)]
 pub enum Start {
     /// From the octagon around the points (paper §III-E), along up to
-    /// `pole_axis_candidates` pole axes ([`pole`]).
+    /// `init.pole_axis_candidates` pole axes ([`pole`]).
     #[default]
     Cold,
     /// From a previous surface (the node's frame-to-frame warm start).
@@ -280,7 +284,7 @@ impl Start {
 pub struct Membrane {
     cfg: Arc<MembraneConfig>,
     fits: Arc<FitCache>,
-    /// `threads` workers, or `None` for rayon's global pool (`threads = 0`).
+    /// `step.threads` workers, or `None` for rayon's global pool (`step.threads = 0`).
     pool: Option<Arc<rayon::ThreadPool>>,
 }
 
@@ -288,7 +292,7 @@ impl Membrane {
     /// Validate `cfg` and build the engine.
     ///
     /// # Errors
-    /// [`ConfigError`] naming the first bad key (or `threads` when the
+    /// [`ConfigError`] naming the first bad key (or `step.threads` when the
     /// worker pool cannot be created).
     pub fn new(cfg: MembraneConfig) -> Result<Self, ConfigError> {
         Self::with_cache(cfg, Arc::new(FitCache::default()), None)
@@ -300,14 +304,14 @@ impl Membrane {
         pool: Option<Arc<rayon::ThreadPool>>,
     ) -> Result<Self, ConfigError> {
         config::validate(&cfg)?;
-        let pool = match (cfg.threads, pool) {
+        let pool = match (cfg.step.threads, pool) {
             (0, _) => None,
             (n, Some(p)) if p.current_num_threads() == n => Some(p),
             (n, _) => Some(Arc::new(
                 rayon::ThreadPoolBuilder::new()
                     .num_threads(n)
                     .build()
-                    .map_err(|e| ConfigError::new("threads", format!("no thread pool: {e}")))?,
+                    .map_err(|e| ConfigError::new("step.threads", format!("no thread pool: {e}")))?,
             )),
         };
         Ok(Self {
@@ -354,16 +358,16 @@ impl Membrane {
     }
 
     /// Factor the fit system that a warm start from an `m × l` surface will
-    /// use (sampled with `alpha_warm`), so that the first warm frame after a
+    /// use (sampled with `fit.alpha_warm`), so that the first warm frame after a
     /// cold one does not pay for it. The frame pipeline calls this at the
     /// end of a cold frame, whose budget is the longer one.
     ///
     /// # Errors
     /// [`MembraneError`] when the grid is invalid or the system is singular.
     pub fn prefactor_warm(&self, m: usize, l: usize) -> Result<(), MembraneError> {
-        let alpha = self.cfg.alpha_warm;
-        if !self.fits.contains(&self.cfg, alpha, m, l) {
-            self.fits.get(&self.cfg, alpha, m, l)?;
+        let alpha = self.cfg.fit.alpha_warm;
+        if !self.fits.contains(&self.cfg.fit, alpha, m, l) {
+            self.fits.get(&self.cfg.fit, alpha, m, l)?;
         }
         Ok(())
     }

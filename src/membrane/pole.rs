@@ -4,8 +4,8 @@
 //! how it meets a tunnel or a deep cavity: with the poles in a torus's hole
 //! the two hole caps stall apart, while from the side the ring is wrapped
 //! closely. A cold whole object whose membrane leaves data-free parts (less
-//! than `pole_axis_support` of its mesh vertices near a point) is therefore
-//! reconstructed along up to `pole_axis_candidates` pole axes (the
+//! than `init.pole_axis_support` of its mesh vertices near a point) is therefore
+//! reconstructed along up to `init.pole_axis_candidates` pole axes (the
 //! configured one, then the most different bounding-box edge), and the
 //! result with the highest final `η_g` × point coverage is kept.
 
@@ -22,8 +22,8 @@ use std::time::Instant;
 
 /// The evolution along the configured pole axis and, for a cold whole
 /// object with an automatic axis (`shortest`/`longest`) whose first
-/// reconstruction has a [`support`] below `pole_axis_support`, along up to
-/// `pole_axis_candidates − 1` other axes, the most different bounding-box
+/// reconstruction has a [`support`] below `init.pole_axis_support`, along up to
+/// `init.pole_axis_candidates − 1` other axes, the most different bounding-box
 /// edge first. The reconstruction with the highest [`selection_score`] is
 /// kept.
 pub(crate) fn reconstruct(
@@ -36,9 +36,9 @@ pub(crate) fn reconstruct(
     let t0 = Instant::now();
     let prep = prepare(cloud, cfg)?;
     let alpha = if warm.is_some() {
-        cfg.alpha_warm
+        cfg.fit.alpha_warm
     } else {
-        cfg.alpha
+        cfg.fit.alpha
     };
     let run = |warm: Option<&WarmStart>, pole: Option<usize>| {
         evolve(
@@ -47,7 +47,7 @@ pub(crate) fn reconstruct(
             budget,
             warm,
             pole,
-            &mut Fits::new(cfg, cache, alpha),
+            &mut Fits::new(&cfg.fit, cache, alpha),
         )
     };
     let first = run(warm, None)?;
@@ -57,12 +57,13 @@ pub(crate) fn reconstruct(
             StopReason::Converged | StopReason::MaxIterations
         )
     };
-    let farthest_first = match cfg.pole_axis {
+    let init = &cfg.init;
+    let farthest_first = match init.pole_axis {
         PoleAxis::Shortest => true,
         PoleAxis::Longest => false,
         PoleAxis::X | PoleAxis::Y | PoleAxis::Z => return Ok(first),
     };
-    if cfg.pole_axis_candidates <= 1
+    if init.pole_axis_candidates <= 1
         || warm.is_some()
         || prep.is_single_view()
         || !within_budget(&first)
@@ -71,17 +72,17 @@ pub(crate) fn reconstruct(
     }
     // A membrane lying on the data everywhere has nothing to gain from
     // another axis; one spanning a hole or a cavity opening has.
-    if support(&first, &prep.points) >= cfg.pole_axis_support {
+    if support(&first, &prep.points) >= init.pole_axis_support {
         return Ok(first);
     }
-    let (lo, hi) = quantile_bounds(&prep.points, cfg.init_quantile);
+    let (lo, hi) = quantile_bounds(&prep.points, init.quantile);
     let extent = hi - lo;
     let mut others: Vec<usize> = (0..3).filter(|&a| a != first.report.pole_axis).collect();
     others.sort_by(|&a, &b| extent[a].total_cmp(&extent[b]));
     if farthest_first {
         others.reverse();
     }
-    others.truncate(cfg.pole_axis_candidates - 1);
+    others.truncate(init.pole_axis_candidates - 1);
     let mut best_score = selection_score(&first, &prep.points);
     let mut best = first;
     let mut tried = 1;

@@ -1,6 +1,6 @@
 //! What the evolution needs from a cloud, prepared once per reconstruction
 //! (and shared by its pole-axis candidates): the finite, distinct points,
-//! thinned to `max_points`; the k-NN outlier filter; the point spacing δ
+//! thinned to `prepare.max_points`; the k-NN outlier filter; the point spacing δ
 //! (paper Eq. 5); a single view's viewpoint and mirrored completion; the
 //! spatial index of the search; the attribute channels of the weighted
 //! separability (Eq. 9); the occupancy grid of the inward force.
@@ -10,9 +10,9 @@
 //! `delta_scale` × their `delta_quantile` for a whole object (1.3 × the
 //! lower quartile by default, which measures the surface's own spacing even
 //! when up to half the points are outliers: the prototype's outlier runs,
-//! `notes/prototype-findings.md`).
+//! `notes/prototype-findings.md`). The keys are those of `membrane.prepare`.
 
-use super::config::MembraneConfig;
+use super::config::{Completion, MembraneConfig, PrepareConfig, SearchDelta};
 use super::occupancy::OutsideGrid;
 use super::{view, MembraneError};
 use crate::cloud::{Aabb, CloudError, PointCloud, Vec3};
@@ -104,7 +104,11 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
     let (finite_idx, non_finite) = finite_distinct(cloud);
     let duplicate = points_in - non_finite - finite_idx.len();
     let finite_len = finite_idx.len();
-    let finite_idx = thin(finite_idx, cfg.max_points);
+    let p = &cfg.prepare;
+    let finite_idx = match p.max_points {
+        Some(cap) => thin(finite_idx, cap),
+        None => finite_idx,
+    };
     let thinned = finite_len - finite_idx.len();
     let finite: Vec<Vec3> = finite_idx.iter().map(|&i| cloud.points[i]).collect();
     if finite.is_empty() {
@@ -119,12 +123,13 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
         .into());
     }
     crate::cloud::check_spread(&finite)?;
-    let (keep, d_kept) =
-        if cfg.density_sample > 0 && finite.len() > cfg.density_sample && !cfg.local_delta {
-            sampled_density(&finite, cfg)?
-        } else {
-            exact_density(&finite, cfg)?
-        };
+    let sample = p
+        .density_sample
+        .filter(|&n| finite.len() > n && p.search_delta == SearchDelta::Global);
+    let (keep, d_kept) = match sample {
+        Some(n) => sampled_density(&finite, p, n)?,
+        None => exact_density(&finite, p)?,
+    };
     let points: Vec<Vec3> = keep.iter().map(|&k| finite[k]).collect();
     let outliers = finite.len() - points.len();
     let e = Aabb::from_points(&points).extent();
@@ -139,11 +144,11 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
     let median = quantile(&mut d_order, 0.5, scale);
     // Single views: the viewpoint, its z-buffer, and the mirrored completion
     // of the unseen side (membrane/view.rs).
-    let mut view = view::resolve(cfg.viewpoint, &points, median);
+    let mut view = view::resolve(cfg.view.viewpoint, &points, median);
     let delta = if view.is_some() {
         median
     } else {
-        (quantile(&mut d_order, cfg.delta_quantile, scale) * cfg.delta_scale).max(1e-9 * scale)
+        (quantile(&mut d_order, p.delta_quantile, scale) * p.delta_scale).max(1e-9 * scale)
     };
     // Per-point d_i of the used points (the sampled density knows only δ).
     let mut d_used = if d_kept.len() == points.len() {
@@ -155,7 +160,7 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
     let completed = complete_view(cfg, view.as_mut(), &mut points, &mut d_used);
     let index = SpatialIndex::new(&points)?;
     // Weighted mode (paper Eq. 9): the attribute channels of the used points.
-    let attributes = if cfg.attributes.is_empty() && cfg.spatial_weight == 1.0 {
+    let attributes = if cfg.step.attributes.is_empty() && cfg.step.spatial_weight == 1.0 {
         None
     } else {
         let used: Vec<usize> = keep.iter().map(|&k| finite_idx[k]).collect();
@@ -184,7 +189,7 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
 }
 
 /// A single view's mirrored completion of its unseen side
-/// (`view_completion`), appended to `points` and `d_used` (each mirror
+/// (`view.completion`), appended to `points` and `d_used` (each mirror
 /// point takes its source's d_i); returns how many were added.
 fn complete_view(
     cfg: &MembraneConfig,
@@ -192,7 +197,7 @@ fn complete_view(
     points: &mut Vec<Vec3>,
     d_used: &mut Vec<f64>,
 ) -> usize {
-    let Some(vb) = view.filter(|_| cfg.view_completion) else {
+    let Some(vb) = view.filter(|_| cfg.view.completion == Completion::Mirror) else {
         return 0;
     };
     let extra = vb.complete(points);
@@ -216,13 +221,11 @@ fn outside_grid(
     delta: f64,
     view: Option<&view::ViewBuffer>,
 ) -> Option<OutsideGrid> {
-    if !cfg.inward_force {
-        return None;
-    }
+    let inward = cfg.step.inward.as_ref()?;
     OutsideGrid::new(
         points,
-        cfg.inward_voxel_delta * delta,
-        cfg.inward_min_points,
+        inward.voxel_delta * delta,
+        inward.min_points,
         1 << 22,
     )
     .map(|mut g| {
@@ -234,7 +237,7 @@ fn outside_grid(
 }
 
 /// The attribute channels and weights of the weighted separability (paper
-/// Eq. 9) named by `membrane.attributes` / `membrane.spatial_weight`, taken
+/// Eq. 9) named by `membrane.step.attributes` / `membrane.step.spatial_weight`, taken
 /// from `cloud` (the used points). `intensity`, `luma` (colour from `r, g, b`)
 /// and `density` are the built-in channels; any other name is a float
 /// channel of the input.
@@ -248,13 +251,13 @@ fn attribute_set(
     delta: f64,
 ) -> Result<AttributeSet, MembraneError> {
     let mut w = AttributeWeights {
-        point: cfg.spatial_weight,
+        point: cfg.step.spatial_weight,
         intensity: 0.0,
         luma: 0.0,
         density: 0.0,
         channels: Vec::new(),
     };
-    for a in &cfg.attributes {
+    for a in &cfg.step.attributes {
         match a.name.as_str() {
             "intensity" => w.intensity += a.weight,
             "luma" => w.luma += a.weight,
@@ -266,13 +269,13 @@ fn attribute_set(
         }
     }
     let set = AttributeSet::from_cloud(cloud, &w, delta, DENSITY_ATTRIBUTE_RADIUS)
-        .map_err(|e| super::ConfigError::new("attributes", e.to_string()))?;
+        .map_err(|e| super::ConfigError::new("step.attributes", e.to_string()))?;
     if let Some(name) = set.missing().first() {
         return Err(MembraneError::MissingAttribute(name.clone()));
     }
     if set.total_weight() <= 0.0 {
         return Err(super::ConfigError::new(
-            "spatial_weight",
+            "step.spatial_weight",
             "the spatial weight and the attribute weights sum to 0",
         )
         .into());
@@ -309,16 +312,16 @@ pub fn thin<T>(points: Vec<T>, cap: usize) -> Vec<T> {
 
 /// The points kept by the outlier filter (indices into `finite`) and the
 /// d_i (paper Eq. 5) of every kept point: every point's k-NN distance, and
-/// `d_i ≤ outlier_factor · median` keeps it.
+/// `d_i ≤ outlier_factor · median` keeps it (every point without a factor).
 fn exact_density(
     finite: &[Vec3],
-    cfg: &MembraneConfig,
+    cfg: &PrepareConfig,
 ) -> Result<(Vec<usize>, Vec<f64>), MembraneError> {
     let density = Density::new(finite, cfg.knn_k)?;
     let d_all = density.per_point();
-    let limit = cfg.outlier_factor * density.median();
-    let keep = kept_or_all(finite.len(), cfg.outlier_factor > 0.0, |k| {
-        d_all[k] <= limit
+    let limit = cfg.outlier_factor.map(|f| f * density.median());
+    let keep = kept_or_all(finite.len(), limit.is_some(), |k| {
+        limit.is_some_and(|l| d_all[k] <= l)
     });
     let d_kept = keep.iter().map(|&k| d_all[k]).collect();
     Ok((keep, d_kept))
@@ -336,27 +339,29 @@ fn kept_or_all(n: usize, filter: bool, keep: impl Fn(usize) -> bool) -> Vec<usiz
     (0..n).collect()
 }
 
-/// `membrane.density_sample`: the k-NN distances of a spread subset of
-/// the points only (δ is their median over the kept ones), and an outlier
-/// filter by voxel counts — a point is kept when the 3×3×3 voxels of edge
-/// ⅔·outlier_factor·δ around it hold more than `knn_k` points. Returns the
-/// kept indices and the d_i of the kept subset points.
+/// `membrane.prepare.density_sample` (`sample`): the k-NN distances of a
+/// spread subset of the points only (δ is their median over the kept
+/// ones), and an outlier filter by voxel counts — a point is kept when
+/// the 3×3×3 voxels of edge ⅔·outlier_factor·δ around it hold more than
+/// `knn_k` points. Returns the kept indices and the d_i of the kept subset
+/// points.
 fn sampled_density(
     finite: &[Vec3],
-    cfg: &MembraneConfig,
+    cfg: &PrepareConfig,
+    sample: usize,
 ) -> Result<(Vec<usize>, Vec<f64>), MembraneError> {
     let k = cfg.knn_k.min(finite.len() - 1);
     if k == 0 {
         return Err(crate::density::DensityError::ZeroK.into());
     }
-    let subset = thin((0..finite.len()).collect(), cfg.density_sample);
+    let subset = thin((0..finite.len()).collect(), sample);
     let queries: Vec<Vec3> = subset.iter().map(|&i| finite[i]).collect();
     let d_sub = crate::density::knn_mean_distances(finite, &queries, k);
     let delta0 = median_of(&d_sub);
-    if !(cfg.outlier_factor > 0.0 && delta0 > 0.0) {
+    let Some(factor) = cfg.outlier_factor.filter(|_| delta0 > 0.0) else {
         return Ok(((0..finite.len()).collect(), d_sub));
-    }
-    let index = SpatialIndex::with_cell_size(finite, cfg.outlier_factor * delta0 * 2.0 / 3.0)?;
+    };
+    let index = SpatialIndex::with_cell_size(finite, factor * delta0 * 2.0 / 3.0)?;
     let inlier: Vec<bool> = finite
         .iter()
         .map(|p| index.count_around([p.x, p.y, p.z]) > k)

@@ -5,7 +5,7 @@
 //!   whole-object reconstructions on the final grid of a cloud at least as
 //!   dense as the samples, search a checkerboard half of the samples per
 //!   iteration; the other half take their searched neighbours' median shift
-//!   (`sparse_warm_search`, `sparse_cold_search`).
+//!   (`step.sparse_warm_search`, `step.sparse_cold_search`).
 //! - **3×3 median filter** of the shifts of moving samples (`median_filter`).
 //! - **Pole tension** (`pole_tension`): near the poles, samples without a
 //!   data force move by the normal component of the step to their grid
@@ -17,7 +17,7 @@
 //!   surface with no data force move by the mean-free umbrella step, so
 //!   dents carried over from earlier frames fade.
 
-use super::config::MembraneConfig;
+use super::config::RegularizeConfig;
 use super::step::{insertion_sort_by, SampleOut, SampleState};
 use super::view;
 
@@ -43,7 +43,7 @@ pub struct Scratch {
 /// pole tension (whole objects only: the unseen back of a single view is
 /// held where it is), then a warm single view's back smoothing.
 pub fn shifts(
-    cfg: &MembraneConfig,
+    cfg: &RegularizeConfig,
     s: Samples<'_>,
     view: Option<&view::ViewBuffer>,
     warm: bool,
@@ -56,11 +56,11 @@ pub fn shifts(
         out.clear();
         out.extend(s.outs.iter().map(|o| o.shift));
     }
-    if cfg.pole_tension > 0.0 && view.is_none() {
-        pole_tension(s, cfg.pole_tension, cfg.pole_tension_rows, out);
+    if let (Some(t), None) = (&cfg.pole_tension, view) {
+        pole_tension(s, t.strength, t.rows, out);
     }
-    if let (Some(vb), true) = (view, warm && cfg.warm_back_smoothing > 0.0) {
-        smooth_occluded_back(s, vb, cfg.warm_back_smoothing, &mut scratch.back, out);
+    if let (Some(vb), Some(k), true) = (view, cfg.warm_back_smoothing, warm) {
+        smooth_occluded_back(s, vb, k, &mut scratch.back, out);
     }
 }
 

@@ -4,9 +4,10 @@
 //! iteration cap or at the caller's deadline.
 //!
 //! After every iteration [`Schedule::next`] takes the iteration's `η_g` and
-//! returns [`Next::Continue`], [`Next::Grow`] (the grid grows by
-//! `grid_step` when the gain `Δη_g` fell below `g_min` after at least
-//! `grow_after` iterations on the grid; 8×5 → 40×25 by default) or
+//! returns [`Next::Continue`], [`Next::Grow`] (with `growth` on, the grid
+//! grows by `growth.grid_step` when the gain `Δη_g` fell below
+//! `growth.g_min` after at least `growth.grow_after` iterations on the grid;
+//! 8×5 → 40×25 by default) or
 //! [`Next::Stop`] (on the final grid, `|Δη_g| < plateau_eps` for
 //! `plateau_patience` iterations). Before every iteration
 //! [`Schedule::budget_stop`] checks the caps and predicts whether another
@@ -17,7 +18,7 @@
 //! (2.5× the 90th percentile of the moving samples' shifts): a fixed decay
 //! left far-off parts of the membrane outside their own search range.
 
-use super::config::MembraneConfig;
+use super::config::{GrowthConfig, ScheduleConfig};
 use super::step::SampleOut;
 use super::{Budget, StopReason};
 use std::time::Instant;
@@ -36,7 +37,7 @@ pub enum Next {
 /// The schedule of one evolution (see the module docs).
 #[derive(Debug)]
 pub struct Schedule<'a> {
-    cfg: &'a MembraneConfig,
+    cfg: &'a ScheduleConfig,
     budget: &'a Budget,
     depth: f64,
     floor: f64,
@@ -56,18 +57,17 @@ pub struct Schedule<'a> {
 
 impl<'a> Schedule<'a> {
     /// A schedule starting at `depth` (in input units, floored at `floor`)
-    /// on `grid`, which may grow to `grid_max` when `adaptive`.
+    /// on `grid`, which may grow to `growth.grid_max` when `growth` is on.
     pub fn new(
-        cfg: &'a MembraneConfig,
+        cfg: &'a ScheduleConfig,
         budget: &'a Budget,
         depth: f64,
         floor: f64,
         grid: [usize; 2],
     ) -> Self {
-        let max_grid = if cfg.adaptive {
-            [cfg.grid_max[0].max(grid[0]), cfg.grid_max[1].max(grid[1])]
-        } else {
-            grid
+        let max_grid = match &cfg.growth {
+            Some(g) => [g.grid_max[0].max(grid[0]), g.grid_max[1].max(grid[1])],
+            None => grid,
         };
         Self {
             cfg,
@@ -149,13 +149,13 @@ impl<'a> Schedule<'a> {
             .max(self.floor);
         let gain = prev.map_or(f64::INFINITY, |p| eta_g - p);
         let [m, l] = grid;
-        if m < self.max_grid[0] || l < self.max_grid[1] {
-            if self.iter_on_grid >= self.cfg.grow_after.max(1) && gain < self.cfg.g_min {
+        if let Some(g) = self.growth_on(grid) {
+            if self.iter_on_grid >= g.grow_after.max(1) && gain < g.g_min {
                 self.iter_on_grid = 0;
                 self.plateau = 0;
                 return Next::Grow([
-                    (m + self.cfg.grid_step[0]).min(self.max_grid[0]),
-                    (l + self.cfg.grid_step[1]).min(self.max_grid[1]),
+                    (m + g.grid_step[0]).min(self.max_grid[0]),
+                    (l + g.grid_step[1]).min(self.max_grid[1]),
                 ]);
             }
             return Next::Continue;
@@ -169,6 +169,13 @@ impl<'a> Schedule<'a> {
             return Next::Stop(StopReason::Converged);
         }
         Next::Continue
+    }
+
+    /// The growth parameters while `grid` is below the largest grid.
+    fn growth_on(&self, grid: [usize; 2]) -> Option<&'a GrowthConfig> {
+        let cfg: &'a ScheduleConfig = self.cfg;
+        let below = grid[0] < self.max_grid[0] || grid[1] < self.max_grid[1];
+        cfg.growth.as_ref().filter(|_| below)
     }
 
     /// Record the wall-clock time of the iteration just decided (including a

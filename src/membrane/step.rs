@@ -4,16 +4,16 @@
 //! rule that turns its profile into a move along the sample's normal.
 //!
 //! The shift rule adds three mechanisms to the paper's "move to t*":
-//! - **inner side denser** with an **inner margin** (`inside_denser`,
-//!   `inner_margin`): only boundaries whose inner region is the denser one
-//!   and at least a fixed fraction of the cuboid's depth are accepted.
+//! - **inner side denser** with an **inner margin** (`step.inside_denser`,
+//!   its `inner_margin`): only boundaries whose inner region is the denser
+//!   one and at least a fixed fraction of the cuboid's depth are accepted.
 //!   Eq. 7 rewards a thin `r1` that a layer fills almost completely, so a
 //!   layer just inside the cuboid's inner end could outscore the layer a
 //!   sample sits on: as the decaying depth passed the thickness of a thin
 //!   wall, samples on one face jumped to the other one and the membrane
 //!   crumpled inside the wall (the bowl: F 0.74 on clean points against
 //!   0.92 with noise, whose thicker layer the cuboid's end cuts);
-//! - **dense-side significance** (`significance`): the band around `t*` must
+//! - **dense-side significance** (`step.significance`): the band around `t*` must
 //!   hold a fraction of the expected surface count `M_w·M_h/δ²`;
 //! - **robust centring**: the shift is the median normal offset of the band's
 //!   points nearest to the sample's axis, which limits the curvature bias
@@ -21,7 +21,7 @@
 //!
 //! A sample with no significant boundary that lies in empty space outside
 //! the object ([`OutsideGrid`]) gets the gated **inward force**
-//! (`inward_force`): `−inward_step·depth` along its normal when the normal
+//! (`step.inward`): `−inward.shift·depth` along its normal when the normal
 //! faces away from the points' centroid. A sample whose normal faces the
 //! centroid belongs either to a legitimately concave part (a bowl's inner
 //! wall) or to a pocket that folded over while wrapping a limb, and the
@@ -37,7 +37,7 @@
 //! but set warm-started frames off course (synth bottle sequence: warm
 //! frames within 0.01 of cold 19/19 → 9/19).
 
-use super::config::MembraneConfig;
+use super::config::StepConfig;
 use super::occupancy::OutsideGrid;
 use super::view;
 use crate::cloud::Vec3;
@@ -110,8 +110,8 @@ pub struct Pass<'a> {
 
 /// Everything the per-sample search needs.
 pub struct Stepper<'a> {
-    /// The membrane parameters.
-    pub cfg: &'a MembraneConfig,
+    /// The step's parameters.
+    pub cfg: &'a StepConfig,
     /// The separability search over the used points.
     pub searcher: Searcher<'a>,
     /// Global point spacing δ.
@@ -144,12 +144,11 @@ impl Stepper<'_> {
         if sp.su.norm_squared() > 0.0 {
             cub = cub.with_tangent(sp.su);
         }
-        let rule = if cfg.inside_denser {
-            BestRule::InnerDenser {
-                min_inner: cfg.inner_margin * depth,
-            }
-        } else {
-            BestRule::Any
+        let rule = match &cfg.inside_denser {
+            Some(d) => BestRule::InnerDenser {
+                min_inner: d.inner_margin * depth,
+            },
+            None => BestRule::Any,
         };
         let Ok(out) = self.searcher.search_best(&cub, rule, &mut ts.search) else {
             return still;
@@ -171,13 +170,14 @@ impl Stepper<'_> {
         }
         // Inward means toward the object: `inward_sign` decides the side
         // (against the normal, along it for a folded-over pocket, or none).
-        if pass.allow_inward && self.is_outside(&sp.p) {
+        let inward = cfg.inward.as_ref().filter(|_| pass.allow_inward);
+        if let Some(w) = inward.filter(|_| self.is_outside(&sp.p)) {
             let sign = self.inward_sign(&sp.p, &still.n);
             if sign == 0.0 {
                 return still;
             }
             return SampleOut {
-                shift: -sign * cfg.inward_step * depth,
+                shift: -sign * w.shift * depth,
                 eta: 0.0,
                 state: SampleState::Inward,
                 ..still

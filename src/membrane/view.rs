@@ -7,7 +7,7 @@
 //! folds the back of the membrane onto the visible shell, and the closure
 //! collapses. This module supplies what the sensor geometry knows:
 //!
-//! 1. **Viewpoint.** Given (`membrane.viewpoint = [x, y, z]`), or detected
+//! 1. **Viewpoint.** Given (`membrane.view.viewpoint = [x, y, z]`), or detected
 //!    (`"auto"`): the origin of the cloud's frame (a sensor frame) is taken
 //!    as the viewpoint when it lies at least [`MIN_VIEW_DISTANCE`] object
 //!    sizes outside the cloud's bounding box (a cloud in a model or object
@@ -21,7 +21,7 @@
 //!    (or nothing was seen there); it is *occluded* when it is behind it.
 //!    The inward force then acts only in seen-free space: the unseen back is
 //!    unknown space, not empty space.
-//! 3. **Completion** (`membrane.view_completion`). The unseen side is
+//! 3. **Completion** (`membrane.view.completion = "mirror"`). The unseen side is
 //!    completed by a symmetry prior: the visible points are mirrored through
 //!    the plane perpendicular to the mean view direction at depth
 //!    `z₀ + max(V, ½·min(Lᵤ, L_w))` (`z₀` the front, `V` the visible depth,
@@ -55,7 +55,7 @@ const MARGIN_DELTA: f64 = 2.0;
 /// Largest z-buffer side (bins).
 const MAX_SIDE: usize = 1024;
 
-/// Where the sensor was (`membrane.viewpoint`).
+/// Where the sensor was (`membrane.view.viewpoint`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(untagged)]
 pub enum Viewpoint {

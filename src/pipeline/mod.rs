@@ -63,7 +63,7 @@ pub struct PipelineConfig {
     pub warm_max_iterations: usize,
     /// Iterations a warm-started frame runs even past its deadline.
     pub warm_min_iterations: usize,
-    /// Iteration cap for a cold frame (0: the membrane's own `max_iterations`).
+    /// Iteration cap for a cold frame (0: the membrane's own `schedule.max_iterations`).
     pub cold_max_iterations: usize,
     /// Wall-clock budget of a warm-started frame in ms (0: no deadline at
     /// all); the live node measures it from the sample's receipt.
@@ -87,7 +87,7 @@ pub struct PipelineConfig {
     pub icp_trim: f64,
     /// At most this many new points per ICP step.
     pub icp_max_points: usize,
-    /// `membrane.density_sample` of warm-started frames (0: the membrane's own).
+    /// `membrane.prepare.density_sample` of warm-started frames (0: the membrane's own).
     pub warm_density_sample: usize,
     /// Marker namespace.
     pub marker_namespace: String,
@@ -678,7 +678,7 @@ impl Membranes {
     pub fn new(membrane: &MembraneConfig, cfg: &PipelineConfig) -> Result<Self, ConfigError> {
         let cold = Membrane::new(membrane.clone())?;
         let warm = if cfg.warm_density_sample > 0 {
-            cold.variant(|m| m.density_sample = cfg.warm_density_sample)?
+            cold.variant(|m| m.prepare.density_sample = Some(cfg.warm_density_sample))?
         } else {
             cold.clone()
         };
@@ -755,10 +755,10 @@ pub fn thinned_subset<'a>(
 }
 
 /// Iteration cap of a cold start: `pipeline.cold_max_iterations`, or the
-/// membrane's own `max_iterations` when that is 0.
+/// membrane's own `schedule.max_iterations` when that is 0.
 pub fn cold_cap(membrane: &MembraneConfig, cfg: &PipelineConfig) -> usize {
     if cfg.cold_max_iterations == 0 {
-        membrane.max_iterations.max(1)
+        membrane.schedule.max_iterations.max(1)
     } else {
         cfg.cold_max_iterations
     }
