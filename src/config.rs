@@ -56,7 +56,9 @@ pub enum ConfigError {
         origin: String,
     },
     /// A key that was renamed: the error names the new one.
-    #[error("parameter `{old}` in {origin} was renamed to `{new}`{note} (see launch/sepmem.json5)")]
+    #[error(
+        "parameter `{old}` in {origin} was renamed to `{new}`{note} (see launch/sepmem.json5)"
+    )]
     RenamedKey {
         /// The old dotted key.
         old: String,
@@ -235,9 +237,7 @@ fn merge(
                     prefix.push('.');
                 }
                 prefix.push_str(&k);
-                let slot = b
-                    .get_mut(&k)
-                    .ok_or_else(|| unknown_key(prefix, origin))?;
+                let slot = b.get_mut(&k).ok_or_else(|| unknown_key(prefix, origin))?;
                 merge(slot, v, prefix, origin)?;
                 prefix.truncate(len);
             }
@@ -313,7 +313,10 @@ mod tests {
             ("membrane.alpha=2", "`membrane.fit.alpha`"),
             ("membrane.threads=1", "`membrane.step.threads`"),
             ("membrane.inward_force=false", "`membrane.step.inward`"),
-            ("membrane.pole_tension_rows=3", "`membrane.regularize.pole_tension.rows`"),
+            (
+                "membrane.pole_tension_rows=3",
+                "`membrane.regularize.pole_tension.rows`",
+            ),
         ] {
             let err = Config::load(None, &[old.into()]).unwrap_err();
             assert!(matches!(err, ConfigError::RenamedKey { .. }), "{err}");
@@ -325,7 +328,10 @@ mod tests {
         let err = Config::load(Some(&path), &[]).unwrap_err();
         let text = err.to_string();
         assert!(text.contains("`membrane.max_iterations`"), "{text}");
-        assert!(text.contains("`membrane.schedule.max_iterations`"), "{text}");
+        assert!(
+            text.contains("`membrane.schedule.max_iterations`"),
+            "{text}"
+        );
     }
 
     #[test]

@@ -409,11 +409,19 @@ fn an_old_membrane_key_names_its_new_key() {
     for (args, want) in cases {
         let o = sepmem(&args);
         assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-        assert!(String::from_utf8_lossy(&o.stderr).contains(want), "{want}: {}", text(&o));
+        assert!(
+            String::from_utf8_lossy(&o.stderr).contains(want),
+            "{want}: {}",
+            text(&o)
+        );
     }
     let o = sepmem(&["config", "--set", "membrane.fit.alpha=2.5"]);
     assert!(o.status.success(), "{}", text(&o));
-    assert!(String::from_utf8_lossy(&o.stdout).contains("\"alpha\": 2.5"), "{}", text(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("\"alpha\": 2.5"),
+        "{}",
+        text(&o)
+    );
 }
 
 /// Issue 22 (10): when no frame succeeds the replay summary says so (it

@@ -25,9 +25,7 @@ pub mod markdown;
 
 use crate::cloud::{Aabb, PointCloud, Vec3};
 use crate::config::{Config, ConfigError};
-use crate::membrane::{
-    self, Budget, GrowthConfig, Membrane, MembraneConfig, MembraneError, Start,
-};
+use crate::membrane::{self, Budget, GrowthConfig, Membrane, MembraneConfig, MembraneError, Start};
 use crate::mesh::TriMesh;
 use crate::metrics::{self, MetricsConfig};
 use crate::shapes::{self, ShapeError};

@@ -507,7 +507,11 @@ fn validate_prepare(p: &PrepareConfig) -> Result<(), ConfigError> {
         "prepare.delta_quantile",
         "must be in (0, 1]",
     )?;
-    check(pos(p.delta_scale), "prepare.delta_scale", "must be positive")
+    check(
+        pos(p.delta_scale),
+        "prepare.delta_scale",
+        "must be positive",
+    )
 }
 
 fn validate_init(i: &InitConfig) -> Result<(), ConfigError> {
@@ -565,7 +569,10 @@ fn validate_step(s: &StepConfig) -> Result<(), ConfigError> {
         ("step.band_inner_delta", s.band_inner_delta),
         ("step.band_outer_delta", s.band_outer_delta),
         ("step.significance", s.significance),
-        ("step.inward.shift", s.inward.as_ref().map_or(0.0, |w| w.shift)),
+        (
+            "step.inward.shift",
+            s.inward.as_ref().map_or(0.0, |w| w.shift),
+        ),
         ("step.spatial_weight", s.spatial_weight),
     ];
     check_each(&finite, non_negative, "must be a finite value >= 0")

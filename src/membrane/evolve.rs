@@ -199,7 +199,14 @@ fn move_and_refit(
         vn,
     };
     let view = prep.view.as_ref();
-    regularize::shifts(&cfg.regularize, samples, view, warm, &mut b.regularize, &mut b.shifts);
+    regularize::shifts(
+        &cfg.regularize,
+        samples,
+        view,
+        warm,
+        &mut b.regularize,
+        &mut b.shifts,
+    );
     b.targets.clear();
     b.targets.extend(
         b.outs

@@ -81,7 +81,9 @@ pub enum MembraneError {
     #[error(transparent)]
     Config(#[from] ConfigError),
     /// An attribute named in the config is not carried by the cloud.
-    #[error("membrane: attribute `{0}` named in membrane.step.attributes is not in the input cloud")]
+    #[error(
+        "membrane: attribute `{0}` named in membrane.step.attributes is not in the input cloud"
+    )]
     MissingAttribute(String),
     /// An internal invariant did not hold (a bug, reported instead of a panic).
     #[error("membrane internal error: {0}")]
@@ -311,7 +313,9 @@ impl Membrane {
                 rayon::ThreadPoolBuilder::new()
                     .num_threads(n)
                     .build()
-                    .map_err(|e| ConfigError::new("step.threads", format!("no thread pool: {e}")))?,
+                    .map_err(|e| {
+                        ConfigError::new("step.threads", format!("no thread pool: {e}"))
+                    })?,
             )),
         };
         Ok(Self {
