@@ -20,6 +20,36 @@
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use thiserror::Error;
 
+/// The one thinning of sepmem (the frame pipeline's `pipeline.max_points`
+/// and the membrane's `membrane.max_points`, `density_sample`): the
+/// increasing indices of exactly `cap` of `n` items (all of them when `cap`
+/// is 0 or at least `n`), those whose SplitMix64 key of the index (mixed
+/// with `salt`) is among the `cap` smallest. Deterministic, independent of
+/// the points' values, and without the stripes a fixed stride leaves in an
+/// organised, row-major cloud.
+pub fn thin_indices(n: usize, cap: usize, salt: u64) -> Vec<usize> {
+    if cap == 0 || n <= cap {
+        return (0..n).collect();
+    }
+    let mix = salt.wrapping_mul(0xD1B5_4A32_D192_ED03);
+    let key = |i: usize| -> u64 {
+        let mut z = (i as u64 ^ mix).wrapping_add(0x9E37_79B9_7F4A_7C15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    };
+    let mut keys: Vec<u64> = (0..n).map(key).collect();
+    let (_, kth, _) = keys.select_nth_unstable(cap - 1);
+    let limit = *kth;
+    let mut out = Vec::with_capacity(cap);
+    for i in 0..n {
+        if key(i) <= limit && out.len() < cap {
+            out.push(i);
+        }
+    }
+    out
+}
+
 /// 3-vector of `f64` used for every position and direction in sepmem.
 pub type Vec3 = Vector3<f64>;
 
@@ -336,6 +366,15 @@ impl PointCloud {
             .collect();
         self.retain_indices(|i| finite[i]);
         before - self.points.len()
+    }
+
+    /// At most `cap` of the points (0: all), picked by [`thin_indices`]
+    /// with `salt`; borrowed when nothing is dropped.
+    pub fn thinned(&self, cap: usize, salt: u64) -> std::borrow::Cow<'_, Self> {
+        if cap == 0 || self.len() <= cap {
+            return std::borrow::Cow::Borrowed(self);
+        }
+        std::borrow::Cow::Owned(self.select(&thin_indices(self.len(), cap, salt)))
     }
 
     /// A new cloud holding the points at `indices` (with their attributes).

@@ -397,7 +397,8 @@ pub fn replay_scored(
     let mut engine = Engine::new(&cfg.membrane, cfg.pipeline.clone(), cfg.wire.clone())?;
     let mut out = Vec::new();
     for m in bag.read(&topics)? {
-        let frame = engine.handle(&m.topic, &m.data, None)?;
+        let now = i64::try_from(m.log_time).unwrap_or(i64::MAX);
+        let frame = engine.handle(&m.topic, &m.data, None, now)?;
         let stamp_ns = frame.sample.header.stamp.to_nanos();
         for (s, p) in frame.sample.streams.iter().zip(frame.processed) {
             let result = p.outcome?;

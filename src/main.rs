@@ -256,12 +256,30 @@ fn main() -> ExitCode {
     match init_logging(cli.log.as_deref()).and_then(|()| run(cli.command)) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            // `{:#}`: the chain of causes on one line, without the backtrace
-            // that anyhow's Debug output adds when RUST_BACKTRACE is set.
-            eprintln!("error: {e:#}");
+            // The chain of causes on one line, without the backtrace that
+            // anyhow's Debug output adds when RUST_BACKTRACE is set.
+            eprintln!("error: {}", one_line(&e));
             ExitCode::FAILURE
         }
     }
+}
+
+/// An error and its causes on one line, `: `-separated; a cause whose text
+/// an outer message already holds (a typed error that names its source) is
+/// not repeated.
+fn one_line(e: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if out.contains(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
 }
 
 /// Install the stderr logger: the filter from `--log` / `$SEPMEM_LOG`, else

@@ -74,6 +74,13 @@ fn a_user_error_is_one_line_without_a_backtrace_even_with_rust_backtrace() {
             "{cmd:?}: {err}"
         );
         assert!(!err.to_lowercase().contains("backtrace"), "{cmd:?}: {err}");
+        // A typed error that names its source is not followed by that
+        // source again (it read "…: No such file or directory (os error
+        // 2): No such file or directory (os error 2)").
+        assert!(
+            err.matches("os error").count() <= 1,
+            "{cmd:?}: a cause repeated: {err}"
+        );
         no_escape(&o, "user error");
     }
 }

@@ -112,7 +112,8 @@ async fn play_and_score(bag_file: &str, node_name: &str, min_f: f64) -> BTreeMap
     };
     let mut scores: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     for (k, m) in messages.iter().enumerate() {
-        let out = engine.handle(&m.topic, &m.data, None).unwrap();
+        let now = i64::try_from(m.log_time).unwrap();
+        let out = engine.handle(&m.topic, &m.data, None, now).unwrap();
         let (sample, processed) = (out.sample, out.processed);
         let want = processed.len();
         assert!(want > 0);

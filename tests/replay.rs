@@ -11,8 +11,8 @@ use kiddo::{KdTree, SquaredEuclidean};
 use sepmem::bag::{Bag, BagWriter};
 use sepmem::config::Config;
 use sepmem::metrics::sample_surface;
-use sepmem::pipeline::engine::{decode_sample, Engine};
-use sepmem::pipeline::{outputs, PathReason, StartPath};
+use sepmem::pipeline::engine::Engine;
+use sepmem::pipeline::{PathReason, StartPath};
 use sepmem::wire::msgs::{FrameDiagnostics, MarkerArray, SurfaceMesh};
 use sepmem::wire::{convert, decode};
 
@@ -41,18 +41,12 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
     let (mut frames, mut warm, mut worst) = (0, 0, 0.0f64);
     let mut first_frame = std::collections::BTreeMap::new();
     for m in &messages {
-        let mut sample = decode_sample(&m.topic, &m.data, &cfg.wire, &cfg.pipeline).unwrap();
-        let streams = std::mem::take(&mut sample.streams);
-        let processed: Vec<_> = streams
-            .into_iter()
-            .map(|s| {
-                let cloud = s.cloud.clone();
-                (cloud, engine.process(s))
-            })
-            .collect();
+        let now = i64::try_from(m.log_time).unwrap();
+        let frame = engine.handle(&m.topic, &m.data, None, now).unwrap();
+        let (sample, processed) = (&frame.sample, &frame.processed);
         assert!(!processed.is_empty(), "{}: no object stream", m.topic);
-        let mut ok = Vec::new();
-        for (cloud, p) in &processed {
+        for (s, p) in sample.streams.iter().zip(processed) {
+            let cloud = &s.cloud;
             let r = p.outcome.as_ref().unwrap();
             frames += 1;
             if r.path == StartPath::Warm {
@@ -128,28 +122,15 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
                 mean / size,
                 cold
             );
-            ok.push(r);
         }
-        for r in &ok {
-            out.write(
-                "/sepmem/mesh",
-                m.log_time,
-                &outputs::surface_mesh(r, &sample.header),
-            )
-            .unwrap();
-            out.write(
-                "/sepmem/frame_diagnostics",
-                m.log_time,
-                &outputs::frame_diagnostics(r, &sample.header, sample.points_in, sample.dropped),
-            )
-            .unwrap();
+        let msgs = frame.messages("sepmem");
+        for (mesh, diag) in &msgs.objects {
+            out.write("/sepmem/mesh", m.log_time, mesh).unwrap();
+            out.write("/sepmem/frame_diagnostics", m.log_time, diag)
+                .unwrap();
         }
-        out.write(
-            "/sepmem/markers",
-            m.log_time,
-            &outputs::marker_array(&ok, &sample.header, "sepmem"),
-        )
-        .unwrap();
+        out.write("/sepmem/markers", m.log_time, &msgs.markers)
+            .unwrap();
     }
     assert_eq!(frames, 15, "5 labelled objects × 3 frames");
     // Real one-sided RGB-D views: the visible side must lie on the scan.

@@ -14,10 +14,10 @@
 //! counted there under its own reason and the node stopped without a panic.
 //! Resident memory is the whole process's: node, observer and publishers.
 
-use super::replay::percentile;
 use super::soak;
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use hdrhistogram::Histogram;
 use sepmem::cloud::{PointCloud, Vec3};
 use sepmem::config::Config;
 use sepmem::metrics::sample_surface;
@@ -125,16 +125,81 @@ fn set_stamp(cdr: &mut [u8], ns: i64) {
     cdr[8..12].copy_from_slice(&t.nanosec.to_le_bytes());
 }
 
-#[derive(Default, Clone)]
+/// What the observer saw, in memory that does not grow with the run's
+/// length (the soak's resident-memory figure is the whole process's, so a
+/// per-mesh record here would read as a leak of the node).
+#[derive(Clone)]
 struct Receipts {
-    /// (receipt ns, latency ms, stream index, stamp ns, quality)
-    meshes: Vec<(i64, f64, usize, i64, u8)>,
-    /// Membrane iterations of each received mesh (receipt ns, iterations).
-    iterations: Vec<(i64, u32)>,
+    /// The measurement window of the healthy streams' frames (stamp ns).
+    window: (i64, i64),
+    /// Healthy streams.
+    streams: usize,
+    /// Meshes received, all streams.
+    total: u64,
+    /// Per healthy stream: meshes of frames stamped in the window, and how
+    /// many of them fitted.
+    meshed: Vec<(u64, u64)>,
+    /// Publish→receipt latency (µs) of the healthy streams' meshes
+    /// received in the window.
+    latency_us: Histogram<u64>,
+    /// Meshes received in the window (all streams): count, membrane
+    /// iterations summed, and how many had none.
+    iterations: (u64, u64, u64),
     /// Per mesh topic, the attachment sequence numbers seen: the node
     /// numbers each publisher's samples from 1, so the gaps are the meshes
     /// the transport dropped (zenoh drops under congestion, silently).
     sequences: BTreeMap<String, Sequences>,
+}
+
+impl Receipts {
+    fn new(streams: usize) -> Result<Self> {
+        Ok(Self {
+            window: (i64::MAX, i64::MAX),
+            streams,
+            total: 0,
+            meshed: vec![(0, 0); streams],
+            latency_us: Histogram::new_with_bounds(1, 3_600_000_000, 3)
+                .context("latency histogram")?,
+            iterations: (0, 0, 0),
+            sequences: BTreeMap::new(),
+        })
+    }
+
+    /// One mesh of stream `idx` (usize::MAX: not a healthy stream).
+    fn see(&mut self, received_ns: i64, stamp: i64, idx: usize, msg: Option<&SurfaceMesh>) {
+        self.total += 1;
+        let (from, end) = self.window;
+        if received_ns >= from {
+            if let Some(m) = msg {
+                let it = &mut self.iterations;
+                *it = (
+                    it.0 + 1,
+                    it.1 + u64::from(m.iterations),
+                    it.2 + u64::from(m.iterations == 0),
+                );
+            }
+            if idx < self.streams {
+                let us = u64::try_from((received_ns - stamp) / 1000)
+                    .unwrap_or(0)
+                    .max(1);
+                self.latency_us.saturating_record(us);
+            }
+        }
+        if let Some(c) = self.meshed.get_mut(idx) {
+            if stamp >= from && stamp < end {
+                let fitted = msg.is_some_and(|m| m.quality == SurfaceMesh::FITTED);
+                *c = (c.0 + 1, c.1 + u64::from(fitted));
+            }
+        }
+    }
+
+    /// A latency quantile in ms (NaN with no mesh).
+    fn latency_ms(&self, q: f64) -> f64 {
+        if self.latency_us.is_empty() {
+            return f64::NAN;
+        }
+        self.latency_us.value_at_quantile(q) as f64 * 1e-3
+    }
 }
 
 /// The sequence numbers received on one topic.
@@ -209,7 +274,7 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
             Some(_) => Some(soak::watch_diagnostics(&node, &node_cfg.outputs.diagnostics).await?),
             None => None,
         };
-        let receipts: Arc<Mutex<Receipts>> = Arc::default();
+        let receipts = Arc::new(Mutex::new(Receipts::new(args.streams)?));
         let r2 = receipts.clone();
         let _sub = node
             .harness
@@ -226,17 +291,12 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
                         .next()
                         .and_then(|n| n.parse::<usize>().ok())
                         .unwrap_or(usize::MAX);
-                    let lat = (s.received_ns - stamp) as f64 * 1e-6;
                     let msg = wire::decode::<SurfaceMesh>(&s.payload).ok();
-                    let quality = msg.as_ref().map_or(u8::MAX, |m| m.quality);
                     if let Ok(mut r) = r2.lock() {
                         if let Some(Ok(a)) = &s.attachment {
                             r.sequences.entry(topic.clone()).or_default().see(a.sequence);
                         }
-                        r.meshes.push((s.received_ns, lat, idx, stamp, quality));
-                        if let Some(m) = msg {
-                            r.iterations.push((s.received_ns, m.iterations));
-                        }
+                        r.see(s.received_ns, stamp, idx, msg.as_ref());
                     }
                 },
             )
@@ -275,6 +335,9 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
         let end = t0 + (args.duration * 1e9) as i64;
         let measure_from = t0 + (args.warmup * 1e9) as i64;
         let window = (measure_from, end);
+        if let Ok(mut r) = receipts.lock() {
+            r.window = window;
+        }
         let published: Arc<Vec<AtomicU64>> =
             Arc::new((0..args.streams).map(|_| AtomicU64::new(0)).collect());
         let mut tasks = Vec::new();
@@ -322,9 +385,9 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
         }
         let summary = node.stop().await?;
         let seen = diag.as_ref().map(|(_, d)| d.lock().map(|d| d.clone()).unwrap_or_default());
-        let r = receipts.lock().map(|r| Receipts { meshes: r.meshes.clone(), iterations: r.iterations.clone(), sequences: r.sequences.clone() }).unwrap_or_default();
+        let r = receipts.lock().map_err(|_| anyhow::anyhow!("the observer panicked"))?.clone();
         let published: Vec<u64> = published.iter().map(|p| p.load(Ordering::Relaxed)).collect();
-        let figures = report(args, &cfg, &summary, &r, &published, window, &rss);
+        let figures = report(args, &cfg, &summary, &r, &published, &rss);
         let verdict = seen.map(|d| hostile_verdict(&d, &sent));
         if let Some(path) = &args.json {
             let mut j = figures;
@@ -357,7 +420,7 @@ async fn sample_rss(
         .await;
         let t = (now_ns() - t0) as f64 * 1e-9;
         let m = rss_mib().unwrap_or(f64::NAN);
-        let n = receipts.lock().map(|r| r.meshes.len()).unwrap_or(0);
+        let n = receipts.lock().map(|r| r.total).unwrap_or(0);
         println!("  t={t:6.1} s  rss {m:7.1} MiB  meshes received {n}");
         rss.push((t, m));
     }
@@ -366,17 +429,12 @@ async fn sample_rss(
 
 /// Per healthy stream: frames published in the measurement window and the
 /// share of them whose mesh was received (any quality) and fitted.
-fn meshed_shares(
-    r: &Receipts,
-    published: &[u64],
-    (from, end): (i64, i64),
-) -> Vec<serde_json::Value> {
+fn meshed_shares(r: &Receipts, published: &[u64]) -> Vec<serde_json::Value> {
     published
         .iter()
+        .zip(&r.meshed)
         .enumerate()
-        .map(|(i, &n)| {
-            let mine = r.meshes.iter().filter(|m| m.2 == i && m.3 >= from && m.3 < end);
-            let (all, fitted) = mine.fold((0u64, 0u64), |(a, f), m| (a + 1, f + u64::from(m.4 == SurfaceMesh::FITTED)));
+        .map(|(i, (&n, &(all, fitted)))| {
             let share = |k: u64| k as f64 / n.max(1) as f64;
             serde_json::json!({"stream": i, "published": n, "meshed": share(all), "fitted": share(fitted)})
         })
@@ -390,22 +448,14 @@ fn report(
     summary: &NodeSummary,
     r: &Receipts,
     published: &[u64],
-    (measure_from, end): (i64, i64),
     rss: &[(f64, f64)],
 ) -> serde_json::Value {
     // Membrane iterations per mesh after warm-up: how much of the
     // per-frame budget went into evolving rather than fixed costs.
-    let healthy = |m: &&(i64, f64, usize, i64, u8)| m.0 >= measure_from && m.2 < args.streams;
-    let its: Vec<u32> = r
-        .iterations
-        .iter()
-        .filter(|(t, _)| *t >= measure_from)
-        .map(|(_, i)| *i)
-        .collect();
-    let it_mean = its.iter().map(|&i| f64::from(i)).sum::<f64>() / its.len().max(1) as f64;
-    let it_zero = 100.0 * its.iter().filter(|&&i| i == 0).count() as f64 / its.len().max(1) as f64;
-    let mut lat: Vec<f64> = r.meshes.iter().filter(healthy).map(|m| m.1).collect();
-    lat.sort_by(f64::total_cmp);
+    let (n_it, sum_it, zero_it) = r.iterations;
+    let it_mean = sum_it as f64 / n_it.max(1) as f64;
+    let it_zero = 100.0 * zero_it as f64 / n_it.max(1) as f64;
+    let n_lat = r.latency_us.len();
     let total: u64 = published.iter().sum();
     let frames: u64 = summary.streams.iter().map(|s| s.frames).sum();
     let drops: u64 = summary.streams.iter().map(|s| s.drops).sum();
@@ -430,7 +480,7 @@ fn report(
             ms(s.p95_s)
         );
     }
-    let shares = meshed_shares(r, published, (measure_from, end));
+    let shares = meshed_shares(r, published);
     for s in &shares {
         println!(
             "healthy stream {}: published {} after warm-up, meshed {:.1} %, fitted {:.1} %",
@@ -448,21 +498,17 @@ fn report(
     let ref_t = 300f64.min(args.duration / 2.0);
     let (rss_ref, rss_last) = (rss_at(ref_t), rss.last().map_or(f64::NAN, |x| x.1));
     let rss_max = rss.iter().map(|x| x.1).fold(f64::NAN, f64::max);
-    let (p50, p95, p99) = (
-        percentile(&lat, 0.5),
-        percentile(&lat, 0.95),
-        percentile(&lat, 0.99),
-    );
-    let mesh_rate = lat.len() as f64 / (args.duration - args.warmup).max(1e-9);
+    let (p50, p95, p99) = (r.latency_ms(0.5), r.latency_ms(0.95), r.latency_ms(0.99));
+    let mesh_rate = n_lat as f64 / (args.duration - args.warmup).max(1e-9);
     println!(
         "\nsummary: published (healthy, after warm-up) {total}, received by the node {received}, processed {frames}, dropped (keep-latest) {drops} ({:.1} %), late {late}; healthy meshes after warm-up {} ({mesh_rate:.1}/s)",
         100.0 * drops as f64 / received.max(1) as f64,
-        lat.len()
+        n_lat
     );
     println!(
         "publish→mesh-receipt latency ms (healthy, after warm-up, {} meshes): p50 {p50:.1} p95 {p95:.1} p99 {p99:.1} max {:.1}",
-        lat.len(),
-        lat.last().copied().unwrap_or(f64::NAN)
+        n_lat,
+        r.latency_ms(1.0)
     );
     println!(
         "membrane iterations per mesh (after warm-up): mean {it_mean:.2}, none {it_zero:.1} %"
@@ -487,8 +533,8 @@ fn report(
         "duration_s": args.duration, "warmup_s": args.warmup,
         "deadline_ms": cfg.pipeline.deadline_ms,
         "published": total, "received": received, "processed": frames,
-        "drops": drops, "late": late, "meshes": lat.len(),
-        "latency_ms": {"p50": p50, "p95": p95, "p99": p99, "n": lat.len()},
+        "drops": drops, "late": late, "meshes": n_lat,
+        "latency_ms": {"p50": p50, "p95": p95, "p99": p99, "n": n_lat},
         "healthy": shares,
         "iterations_per_mesh": {"mean": it_mean, "none_percent": it_zero},
         "rss_mib": rss.iter().map(|(t, m)| serde_json::json!([t, m])).collect::<Vec<_>>(),

@@ -273,7 +273,8 @@ pub fn run_opts(
     let (mut bad_samples, mut failed) = (0usize, 0usize);
     for m in &messages {
         bar.inc(1);
-        let frame = match engine.handle(&m.topic, &m.data, None) {
+        let now = i64::try_from(m.log_time).unwrap_or(i64::MAX);
+        let frame = match engine.handle(&m.topic, &m.data, None, now) {
             Ok(x) => x,
             Err(e) => {
                 bad_samples += 1;

@@ -283,31 +283,16 @@ fn attribute_set(
     Ok(set)
 }
 
-/// Keep at most `cap` of `points` (0 = all): the points whose index hash
-/// falls below `cap/len`, a deterministic pseudo-random subsample that does
-/// not alias with scan-line order. Exactly `cap` points are kept.
-pub fn thin<T>(points: Vec<T>, cap: usize) -> Vec<T> {
-    let n = points.len();
-    if cap == 0 || n <= cap {
+/// Keep at most `cap` of `points` (0 = all), by [`crate::cloud::thin_indices`]
+/// (salt 0). Exactly `cap` points are kept.
+pub fn thin<T: Copy>(points: Vec<T>, cap: usize) -> Vec<T> {
+    if cap == 0 || points.len() <= cap {
         return points;
     }
-    // SplitMix64 of the index: a fixed pseudo-random key per index.
-    let key = |i: usize| -> u64 {
-        let mut z = (i as u64).wrapping_add(0x9E37_79B9_7F4A_7C15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    };
-    let mut keys: Vec<u64> = (0..n).map(key).collect();
-    let (_, kth, _) = keys.select_nth_unstable(cap - 1);
-    let limit = *kth;
-    let mut out = Vec::with_capacity(cap);
-    for (i, p) in points.into_iter().enumerate() {
-        if key(i) <= limit && out.len() < cap {
-            out.push(p);
-        }
-    }
-    out
+    crate::cloud::thin_indices(points.len(), cap, 0)
+        .into_iter()
+        .map(|i| points[i])
+        .collect()
 }
 
 /// The points kept by the outlier filter (indices into `finite`) and the

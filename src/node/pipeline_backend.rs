@@ -16,8 +16,8 @@ use super::reasons;
 use super::stats::Level;
 use crate::membrane::{ConfigError, MembraneConfig, StopReason};
 use crate::pipeline::collision::{CollisionConfig, CollisionObjects};
-use crate::pipeline::engine::{decode_sample, DecodedSample, StreamCloud};
-use crate::pipeline::objects::{cap_objects, Entry, ObjectBook, Quality};
+use crate::pipeline::engine::{DecodedSample, Engine, FrameOutput as EngineFrame, Shown};
+use crate::pipeline::objects::Quality;
 use crate::pipeline::{
     outputs, Deadlines, FrameResult as PipelineResult, Membranes, PipelineConfig, StartPath,
 };
@@ -28,7 +28,6 @@ use crate::wire::msgs::{
 };
 use crate::wire::pointcloud2::WireConfig;
 use crate::wire::{self, RosMessage};
-use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
 fn ty<M: RosMessage>() -> RosType {
@@ -70,10 +69,7 @@ impl PipelineBackend {
 }
 
 struct EngineProcessor {
-    membranes: Membranes,
-    pipeline: PipelineConfig,
-    limits: WireConfig,
-    objects: ObjectBook,
+    engine: Engine,
     ns: String,
     last_header: Header,
     collision: Option<CollisionObjects>,
@@ -117,39 +113,28 @@ impl FrameOut {
 }
 
 impl EngineProcessor {
-    /// The outputs of one evolved object: its verdict decides whether this
-    /// frame's mesh or the object's last fitted one is published
-    /// ([`crate::pipeline::objects`]).
-    fn emit(
-        &self,
-        entry: &mut Entry,
-        r: &PipelineResult,
-        sample: &DecodedSample,
-        out: &mut FrameOut,
-    ) -> bool {
+    /// The outputs of one evolved object: the mesh and marker the engine
+    /// chose to show ([`crate::pipeline::objects`]), its frame diagnostics
+    /// and its `/diagnostics` report.
+    fn emit(&self, r: &PipelineResult, shown: &Shown, sample: &DecodedSample, out: &mut FrameOut) {
         let rep = &r.reconstruction.report;
-        let verdict = entry.verdict(r, &self.pipeline.objects);
-        let (mesh, marker, shown) = entry.publish(
-            verdict,
-            outputs::surface_mesh(r, &sample.header),
-            outputs::separability_marker(r, &sample.header, &self.ns),
-        );
-        out.encode(OutputKind::Mesh, &mesh);
+        out.encode(OutputKind::Mesh, &shown.mesh);
         out.encode(
             OutputKind::FrameDiagnostics,
             &outputs::frame_diagnostics(r, &sample.header, sample.points_in, sample.dropped),
         );
-        out.markers.push(marker);
-        if !verdict.is_fitted() {
+        out.markers.push(shown.marker.clone());
+        let fitted = shown.verdict.is_fitted();
+        if !fitted {
             reasons::bump(&mut out.counts, reasons::UNFITTED, 1);
         }
         let warm = r.path == StartPath::Warm;
-        let level = if rep.stop == StopReason::Deadline || !verdict.is_fitted() {
+        let level = if rep.stop == StopReason::Deadline || !fitted {
             Level::Warn
         } else {
             Level::Ok
         };
-        let shown_note = if shown == Quality::Held {
+        let shown_note = if shown.quality == Quality::Held {
             "; showing the last fitted mesh"
         } else {
             ""
@@ -165,115 +150,99 @@ impl EngineProcessor {
                 if warm { "warm" } else { "cold" },
                 r.reason,
                 rep.stop,
-                verdict.as_str(),
+                shown.verdict.as_str(),
             ),
-            quality: Some(shown.as_str()),
+            quality: Some(shown.quality.as_str()),
         });
-        verdict.is_fitted()
     }
-}
 
-impl EngineProcessor {
     /// MoveIt collision objects of the frame's fitted surfaces (ADD or
     /// MOVE), then REMOVE for the objects no longer tracked; an unfitted
     /// surface never reaches the planning scene.
-    fn collision_objects(
-        &mut self,
-        fitted: &[PipelineResult],
-        header: &Header,
-        out: &mut FrameOut,
-    ) {
+    fn collision_objects(&mut self, frame: &EngineFrame, out: &mut FrameOut) {
         let Some(co) = self.collision.as_mut() else {
             return;
         };
-        let refs: Vec<&PipelineResult> = fitted.iter().collect();
-        let objects = &self.objects;
-        let (msgs, errs) = co.frame(&refs, header, |s| objects.contains_stream(s));
+        let fitted: Vec<&PipelineResult> = frame
+            .processed
+            .iter()
+            .filter(|p| p.shown.as_ref().is_some_and(|s| s.verdict.is_fitted()))
+            .filter_map(|p| p.outcome.as_ref().ok())
+            .collect();
+        let objects = self.engine.objects();
+        let (msgs, errs) = co.frame(&fitted, &frame.sample.header, |s| {
+            objects.contains_stream(s)
+        });
         for m in &msgs {
             out.encode(OutputKind::CollisionObjects, m);
         }
         out.errors.extend(errs);
     }
-}
 
-impl TopicProcessor for EngineProcessor {
-    fn process(&mut self, frame: &Frame) -> FrameResult {
+    /// The counts and outputs of a processed frame.
+    fn outputs(&mut self, frame: &EngineFrame) -> FrameOut {
         let mut out = FrameOut::default();
-        let mut sample =
-            match decode_sample(&frame.topic, &frame.payload, &self.limits, &self.pipeline) {
-                Ok(s) => s,
-                Err(e) => {
-                    reasons::bump(&mut out.counts, reasons::of_sample_error(&e), 1);
-                    return FrameResult {
-                        error: Some(e.to_string()),
-                        counts: out.counts,
-                        ..FrameResult::default()
-                    };
-                }
-            };
-        self.last_header = sample.header.clone();
-        let mut streams = std::mem::take(&mut sample.streams);
-        let skipped = cap_objects(&mut streams, self.pipeline.objects.max_per_frame);
-        reasons::bump(&mut out.counts, reasons::OBJECTS_SKIPPED, skipped as u64);
-        // The node's deadline runs from receipt; every object of a labelled
-        // cloud shares it, however many compute waves the objects take.
-        let deadlines = node_deadlines(&self.pipeline, frame.deadline);
-        let (entries, reidentified) = self
-            .objects
-            .checkout_frame(&streams, self.pipeline.objects.reidentify.as_ref());
         reasons::bump(
             &mut out.counts,
-            reasons::LABELS_REIDENTIFIED,
-            reidentified.len() as u64,
+            reasons::OBJECTS_SKIPPED,
+            frame.skipped as u64,
         );
-        let mut work: Vec<(Entry, StreamCloud)> = entries.into_iter().zip(streams).collect();
-        let (membranes, pipeline) = (&self.membranes, &self.pipeline);
-        let outcomes: Vec<_> = work
-            .par_iter_mut()
-            .map(|(e, s)| {
-                e.tracker
-                    .process_by(&s.cloud, membranes, pipeline, deadlines)
-            })
-            .collect();
-        let mut fitted = Vec::new();
-        for ((mut entry, _), outcome) in work.into_iter().zip(outcomes) {
-            match outcome {
-                Ok(r) => {
-                    if self.emit(&mut entry, &r, &sample, &mut out) {
-                        fitted.push(r);
-                    }
-                }
-                Err(e) => {
+        let reid = frame.reidentified.len() as u64;
+        reasons::bump(&mut out.counts, reasons::LABELS_REIDENTIFIED, reid);
+        for p in &frame.processed {
+            match (&p.outcome, &p.shown) {
+                (Ok(r), Some(shown)) => self.emit(r, shown, &frame.sample, &mut out),
+                (Ok(_), None) => {}
+                (Err(e), _) => {
                     reasons::bump(&mut out.counts, reasons::OBJECT_ERRORS, 1);
                     out.errors.push(e.to_string());
                 }
             }
-            self.objects.checkin(entry, frame.received_ns);
         }
-        let evicted = self
-            .objects
-            .evict(frame.received_ns, &self.pipeline.objects);
-        reasons::bump(
-            &mut out.counts,
-            reasons::LABELS_EVICTED,
-            evicted.len() as u64,
-        );
-        let markers =
-            outputs::cleared_markers(std::mem::take(&mut out.markers), &sample.header, &self.ns);
+        let evicted = frame.evicted.len() as u64;
+        reasons::bump(&mut out.counts, reasons::LABELS_EVICTED, evicted);
+        let header = &frame.sample.header;
+        let markers = outputs::cleared_markers(std::mem::take(&mut out.markers), header, &self.ns);
         out.encode(OutputKind::Markers, &markers);
-        self.collision_objects(&fitted, &sample.header, &mut out);
+        self.collision_objects(frame, &mut out);
+        out
+    }
+}
+
+impl TopicProcessor for EngineProcessor {
+    fn process(&mut self, frame: &Frame) -> FrameResult {
+        // The node's deadline runs from receipt; every object of a labelled
+        // cloud shares it, however many compute waves the objects take.
+        let deadlines = node_deadlines(&self.engine.pipeline, frame.deadline);
+        let handled = self.engine.handle(
+            &frame.topic,
+            &frame.payload,
+            Some(deadlines),
+            frame.received_ns,
+        );
+        let done = match handled {
+            Ok(done) => done,
+            Err(e) => {
+                let mut counts = Vec::new();
+                reasons::bump(&mut counts, reasons::of_sample_error(&e), 1);
+                return FrameResult {
+                    error: Some(e.to_string()),
+                    counts,
+                    ..FrameResult::default()
+                };
+            }
+        };
+        self.last_header = done.sample.header.clone();
+        let out = self.outputs(&done);
         FrameResult {
             outputs: out.outputs,
             objects: out.objects,
-            error: if out.errors.is_empty() {
-                None
-            } else {
-                Some(out.errors.join("; "))
-            },
+            error: (!out.errors.is_empty()).then(|| out.errors.join("; ")),
             counts: out.counts,
-            evicted: evicted
+            evicted: done
+                .evicted
                 .iter()
-                .chain(&reidentified)
+                .chain(&done.reidentified)
                 .map(ToString::to_string)
                 .collect(),
         }
@@ -330,10 +299,11 @@ impl Backend for PipelineBackend {
 
     fn processor(&self, _topic: &str) -> Box<dyn TopicProcessor> {
         Box::new(EngineProcessor {
-            membranes: self.membranes.clone(),
-            pipeline: self.pipeline.clone(),
-            limits: self.limits.clone(),
-            objects: ObjectBook::default(),
+            engine: Engine::with_membranes(
+                self.membranes.clone(),
+                self.pipeline.clone(),
+                self.limits.clone(),
+            ),
             ns: self.pipeline.marker_namespace.clone(),
             last_header: Header::default(),
             collision: self.collision.clone().map(CollisionObjects::new),

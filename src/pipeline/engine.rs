@@ -1,22 +1,26 @@
 //! The one frame path: decode → track → reconstruct → output messages.
 //!
 //! [`Engine::handle`] takes a raw CDR `PointCloud2` sample, decodes and
-//! splits it into object streams, runs each stream's [`Tracker`] (the
-//! streams of one sample in parallel: they share no state) and
+//! splits it into object streams, keeps the largest
+//! `pipeline.objects.max_per_frame`, takes their entries out of the
+//! [`ObjectBook`] (re-identifying relabelled objects), runs each object's
+//! [`super::Tracker`] (the objects of one sample in parallel: they share no
+//! state), gives each surface its quality verdict (an unfitted surface
+//! never replaces the object's last fitted mesh), and evicts silent labels.
 //! [`FrameOutput::messages`] builds the messages of the frame. The live
 //! node (`node::pipeline_backend`), `sepmem replay` and the scored replay of
 //! [`crate::eval`] all go through it, so they publish the same meshes for
 //! the same samples.
 
-use super::{outputs, Deadlines, Membranes, PipelineConfig, PipelineError, StreamKey, Tracker};
+use super::objects::{cap_objects, ObjectBook, Quality};
+use super::{outputs, Deadlines, Membranes, PipelineConfig, PipelineError, StreamKey};
 use crate::cloud::PointCloud;
 use crate::membrane::{ConfigError, MembraneConfig};
-use crate::wire::msgs::{FrameDiagnostics, Header, MarkerArray, SurfaceMesh};
+use crate::wire::msgs::{FrameDiagnostics, Header, Marker, MarkerArray, SurfaceMesh};
 use crate::wire::pointcloud2::{
     decode_pointcloud2_cdr, split_by_label, PointCloud2Error, WireConfig,
 };
 use rayon::prelude::*;
-use std::collections::BTreeMap;
 use thiserror::Error;
 
 /// A sample that could not be turned into clouds.
@@ -100,6 +104,20 @@ pub fn split_streams(topic: &str, cloud: PointCloud, cfg: &PipelineConfig) -> Ve
     }]
 }
 
+/// What a frame publishes for one object.
+#[derive(Debug, Clone)]
+pub struct Shown {
+    /// The verdict on this frame's surface, given the object's history.
+    pub verdict: Quality,
+    /// The quality of what is shown: the verdict, or [`Quality::Held`] when
+    /// the object's last fitted mesh is shown instead.
+    pub quality: Quality,
+    /// The mesh published.
+    pub mesh: SurfaceMesh,
+    /// Its marker (a TRIANGLE_LIST coloured by separability or verdict).
+    pub marker: Marker,
+}
+
 /// The outcome of one stream of one sample.
 #[derive(Debug)]
 pub struct Processed {
@@ -109,9 +127,11 @@ pub struct Processed {
     pub points: usize,
     /// The frame result or why it failed.
     pub outcome: Result<super::FrameResult, PipelineError>,
+    /// What is published for it (`None` when the outcome is an error).
+    pub shown: Option<Shown>,
 }
 
-/// Trackers for every stream seen so far, processed one after the other.
+/// Every object stream's state, and the frame path over it.
 #[derive(Debug, Clone)]
 pub struct Engine {
     /// The membranes (built once from the membrane parameters).
@@ -120,7 +140,7 @@ pub struct Engine {
     pub pipeline: PipelineConfig,
     /// Input limits.
     pub limits: WireConfig,
-    trackers: BTreeMap<StreamKey, Tracker>,
+    objects: ObjectBook,
 }
 
 impl Engine {
@@ -148,86 +168,98 @@ impl Engine {
             membranes,
             pipeline,
             limits,
-            trackers: BTreeMap::new(),
+            objects: ObjectBook::default(),
         }
     }
 
-    /// Decode one sample and process each of its streams (in parallel)
-    /// under `deadlines` (`None`: each tracker's own, from the pipeline
+    /// Decode one sample received at `now_ns` (the clock of
+    /// `pipeline.objects.forget_after_ms`: receipt time live, the bag's log
+    /// time in a replay) and process its objects (in parallel) under
+    /// `deadlines` (`None`: each tracker's own, from the pipeline
     /// configuration, measured from its start).
     ///
     /// # Errors
-    /// [`SampleError`] when the sample cannot be decoded; per-stream failures
+    /// [`SampleError`] when the sample cannot be decoded; per-object failures
     /// are reported inside the returned [`Processed`] items instead.
     pub fn handle(
         &mut self,
         topic: &str,
         cdr: &[u8],
         deadlines: Option<Deadlines>,
+        now_ns: i64,
     ) -> Result<FrameOutput, SampleError> {
-        let sample = decode_sample(topic, cdr, &self.limits, &self.pipeline)?;
-        let mut work: Vec<(Tracker, &StreamCloud)> = sample
-            .streams
-            .iter()
-            .map(|s| {
-                let t = self
-                    .trackers
-                    .remove(&s.key)
-                    .unwrap_or_else(|| Tracker::new(s.key.clone()));
-                (t, s)
+        let mut sample = decode_sample(topic, cdr, &self.limits, &self.pipeline)?;
+        let objects_cfg = &self.pipeline.objects;
+        let skipped = cap_objects(&mut sample.streams, objects_cfg.max_per_frame);
+        let (mut entries, reidentified) = self
+            .objects
+            .checkout_frame(&sample.streams, objects_cfg.reidentify.as_ref());
+        let (membranes, pipeline) = (&self.membranes, &self.pipeline);
+        let outcomes: Vec<_> = entries
+            .par_iter_mut()
+            .zip(&sample.streams)
+            .map(|(e, s)| match deadlines {
+                Some(d) => e.tracker.process_by(&s.cloud, membranes, pipeline, d),
+                None => e.tracker.process(&s.cloud, membranes, pipeline),
             })
             .collect();
-        let (membranes, pipeline) = (&self.membranes, &self.pipeline);
-        let processed = work
-            .par_iter_mut()
-            .map(|(t, s)| Processed {
+        let mut processed = Vec::with_capacity(outcomes.len());
+        for ((mut entry, s), outcome) in entries.into_iter().zip(&sample.streams).zip(outcomes) {
+            let shown = outcome.as_ref().ok().map(|r| {
+                let verdict = entry.verdict(r, &self.pipeline.objects);
+                let ns = &self.pipeline.marker_namespace;
+                let (mesh, marker, quality) = entry.publish(
+                    verdict,
+                    outputs::surface_mesh(r, &sample.header),
+                    outputs::separability_marker(r, &sample.header, ns),
+                );
+                Shown {
+                    verdict,
+                    quality,
+                    mesh,
+                    marker,
+                }
+            });
+            self.objects.checkin(entry, now_ns);
+            processed.push(Processed {
                 key: s.key.clone(),
                 points: s.cloud.len(),
-                outcome: match deadlines {
-                    Some(d) => t.process_by(&s.cloud, membranes, pipeline, d),
-                    None => t.process(&s.cloud, membranes, pipeline),
-                },
-            })
-            .collect();
-        for (t, s) in work {
-            self.trackers.insert(s.key.clone(), t);
+                outcome,
+                shown,
+            });
         }
-        Ok(FrameOutput { sample, processed })
+        let evicted = self.objects.evict(now_ns, &self.pipeline.objects);
+        Ok(FrameOutput {
+            sample,
+            processed,
+            skipped,
+            reidentified,
+            evicted,
+        })
     }
 
-    /// Process one stream's cloud on its own.
-    pub fn process(&mut self, s: StreamCloud) -> Processed {
-        self.process_ref(&s)
-    }
-
-    /// Process one stream's cloud on its own, leaving it to the caller.
-    pub fn process_ref(&mut self, s: &StreamCloud) -> Processed {
-        let tracker = self
-            .trackers
-            .entry(s.key.clone())
-            .or_insert_with(|| Tracker::new(s.key.clone()));
-        let outcome = tracker.process(&s.cloud, &self.membranes, &self.pipeline);
-        Processed {
-            key: s.key.clone(),
-            points: s.cloud.len(),
-            outcome,
-        }
-    }
-
-    /// The trackers, by stream.
-    pub fn trackers(&self) -> &BTreeMap<StreamKey, Tracker> {
-        &self.trackers
+    /// The objects tracked.
+    pub fn objects(&self) -> &ObjectBook {
+        &self.objects
     }
 }
 
-/// One sample through the frame path: the decoded sample (its streams'
-/// clouds kept, e.g. for scoring) and one outcome per stream, in order.
+/// One sample through the frame path: the decoded sample (its evolved
+/// streams' clouds kept, e.g. for scoring) and one outcome per stream, in
+/// order.
 #[derive(Debug)]
 pub struct FrameOutput {
-    /// The decoded sample.
+    /// The decoded sample; `streams` holds the objects evolved (the largest
+    /// `pipeline.objects.max_per_frame`).
     pub sample: DecodedSample,
     /// One outcome per stream of `sample.streams`.
     pub processed: Vec<Processed>,
+    /// Objects of the sample beyond `pipeline.objects.max_per_frame`, not evolved.
+    pub skipped: usize,
+    /// The labels whose trackers new labels took over (re-identified).
+    pub reidentified: Vec<StreamKey>,
+    /// The labels forgotten after this frame (silent, or beyond `max_tracked`).
+    pub evicted: Vec<StreamKey>,
 }
 
 /// The messages of one frame.
@@ -251,23 +283,28 @@ impl FrameOutput {
     /// The output messages of the frame (marker namespace `ns`).
     pub fn messages(&self, ns: &str) -> FrameMessages {
         let header = &self.sample.header;
-        let ok = self.results();
-        FrameMessages {
-            objects: ok
+        let shown = || {
+            self.processed
                 .iter()
-                .map(|r| {
-                    (
-                        outputs::surface_mesh(r, header),
-                        outputs::frame_diagnostics(
-                            r,
-                            header,
-                            self.sample.points_in,
-                            self.sample.dropped,
-                        ),
-                    )
+                .filter_map(|p| Some((p.outcome.as_ref().ok()?, p.shown.as_ref()?)))
+        };
+        FrameMessages {
+            objects: shown()
+                .map(|(r, s)| {
+                    let diag = outputs::frame_diagnostics(
+                        r,
+                        header,
+                        self.sample.points_in,
+                        self.sample.dropped,
+                    );
+                    (s.mesh.clone(), diag)
                 })
                 .collect(),
-            markers: outputs::marker_array(&ok, header, ns),
+            markers: outputs::cleared_markers(
+                shown().map(|(_, s)| s.marker.clone()).collect(),
+                header,
+                ns,
+            ),
         }
     }
 }

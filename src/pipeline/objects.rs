@@ -189,7 +189,7 @@ struct Fit {
 
 /// One object's state: its tracker, when it was last seen, how far its
 /// surface is fitted, and its last fitted mesh and marker.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct Entry {
     /// The warm-start tracker.
     pub tracker: Tracker,
@@ -261,7 +261,7 @@ impl Entry {
 }
 
 /// The objects of one stream, by key.
-#[derive(Debug, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct ObjectBook {
     entries: BTreeMap<StreamKey, Entry>,
 }
