@@ -21,7 +21,7 @@ use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use thiserror::Error;
 
 /// The one thinning of sepmem (the frame pipeline's `pipeline.max_points`
-/// and the membrane's `membrane.max_points`, `density_sample`): the
+/// and the membrane's `membrane.prepare.max_points`, `density_sample`): the
 /// increasing indices of exactly `cap` of `n` items (all of them when `cap`
 /// is 0 or at least `n`), those whose SplitMix64 key of the index (mixed
 /// with `salt`) is among the `cap` smallest. Deterministic, independent of
