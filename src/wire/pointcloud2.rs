@@ -14,8 +14,9 @@
 //! Decoding is linear in the message size (measured by the regression test
 //! `absurd_field_count_is_rejected_in_linear_time` and the fuzz targets):
 //! the fields may expand into at most `min(point_step, MAX_CHANNELS)`
-//! channels (checked before a single name is formatted), and channel names
-//! are deduplicated in a hash set. Before this, a 133-byte message with one
+//! channels, those with `count > 1` into at most `MAX_EXPANDED` (both
+//! checked before a single name is formatted), and channel names are
+//! deduplicated in a hash set. Before this, a 133-byte message with one
 //! INT8 field of count 4·10⁹ stalled a compute thread for good.
 //!
 //! Points with a NaN or infinite coordinate are skipped and counted, never
@@ -125,6 +126,13 @@ pub enum PointCloud2Error {
         /// The limit applied.
         max: u64,
     },
+    /// The fields with `count > 1` expand into more channels together than
+    /// [`MAX_EXPANDED`].
+    #[error("PointCloud2 fields with count > 1 expand into {channels} channels, more than {MAX_EXPANDED}")]
+    TooManyExpanded {
+        /// Sum of the `count`s of the non-coordinate fields with count > 1.
+        channels: u64,
+    },
     /// The CDR bytes are not a valid PointCloud2.
     #[error(transparent)]
     Cdr(#[from] super::WireError),
@@ -216,6 +224,15 @@ fn read_u32_bits(p: &[u8], off: usize, be: bool) -> u32 {
 /// gives k channels). PCL's widest descriptor (SHOT, 1344 + 9 values) fits.
 pub const MAX_CHANNELS: u64 = 1 << 16;
 
+/// Most channels the fields with `count > 1` may expand into together.
+/// Each is a formatted name, so this bounds what a small message can ask
+/// for: libFuzzer found a 203-byte message (point_step 59,136, no points)
+/// whose counts expanded into ~59 k channel names, 279 ms per decode under
+/// coverage instrumentation. PCL's widest descriptor (SHOT, 1344 + 9
+/// values) fits. One channel per field needs no such bound: each field
+/// costs its bytes in the message.
+pub const MAX_EXPANDED: u64 = 4096;
+
 /// The channel names and one reader per channel (the first field claiming a
 /// channel name wins, e.g. `rgb` before separate `r`/`g`/`b`).
 ///
@@ -235,6 +252,15 @@ fn channel_layout(msg: &PointCloud2) -> Result<(Vec<String>, Vec<Reader>), Point
             channels: expanded,
             max,
         });
+    }
+    let multi: u64 = msg
+        .fields
+        .iter()
+        .filter(|f| f.count > 1 && !matches!(f.name.as_str(), "x" | "y" | "z"))
+        .map(|f| u64::from(f.count))
+        .sum();
+    if multi > MAX_EXPANDED {
+        return Err(PointCloud2Error::TooManyExpanded { channels: multi });
     }
     let mut names: Vec<String> = Vec::new();
     let mut seen: HashSet<String> = HashSet::new();
@@ -709,6 +735,29 @@ mod tests {
                 max: 20
             })
         );
+    }
+
+    /// Found by libFuzzer: a message of a few hundred bytes whose field
+    /// counts fit its large point_step (59,136) expanded into ~59 k channel
+    /// names (279 ms per decode under coverage instrumentation).
+    #[test]
+    fn a_small_message_cannot_ask_for_many_expanded_channels() {
+        let mut m = poisoned(50_000);
+        m.point_step = 60_000;
+        let bytes = super::super::encode(&m).unwrap();
+        assert!(bytes.len() <= 140, "{} bytes", bytes.len());
+        assert_eq!(
+            decode_pointcloud2_cdr(&bytes, &WireConfig::default()).unwrap_err(),
+            PointCloud2Error::TooManyExpanded { channels: 50_000 }
+        );
+        // A SHOT descriptor (1344 + 9 values) still decodes.
+        let mut m = poisoned(1353);
+        m.height = 1;
+        m.width = 1;
+        m.row_step = m.point_step;
+        m.data = vec![0; m.point_step as usize];
+        let c = decode_pointcloud2(&m, &WireConfig::default()).unwrap();
+        assert_eq!(c.cloud.attributes.len(), 1353);
     }
 
     #[test]
