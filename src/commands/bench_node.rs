@@ -80,6 +80,23 @@ fn rss_mib() -> Option<f64> {
     Some(kb / 1024.0)
 }
 
+/// Bytes the heap holds in live allocations and in all (MiB), from
+/// glibc's `mallinfo2`: with the RSS they tell a leak (in use grows) from
+/// fragmentation (only the RSS grows).
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+#[allow(unsafe_code)]
+fn heap_mib() -> Option<(f64, f64)> {
+    // SAFETY: mallinfo2 only reads the allocator's statistics.
+    let m = unsafe { libc::mallinfo2() };
+    let mib = |b: usize| b as f64 / (1024.0 * 1024.0);
+    Some((mib(m.uordblks + m.hblkhd), mib(m.arena + m.hblkhd)))
+}
+
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+fn heap_mib() -> Option<(f64, f64)> {
+    None
+}
+
 /// Pre-encoded frames of one stream: the ellipsoid moved along a small
 /// circle; the stamp is patched at publish time.
 fn stream_frames(index: usize, points: usize, frames: usize) -> Result<Vec<Vec<u8>>> {
@@ -421,7 +438,10 @@ async fn sample_rss(
         let t = (now_ns() - t0) as f64 * 1e-9;
         let m = rss_mib().unwrap_or(f64::NAN);
         let n = receipts.lock().map(|r| r.total).unwrap_or(0);
-        println!("  t={t:6.1} s  rss {m:7.1} MiB  meshes received {n}");
+        let heap = heap_mib().map_or_else(String::new, |(used, all)| {
+            format!("  heap in use {used:7.1} of {all:7.1} MiB")
+        });
+        println!("  t={t:6.1} s  rss {m:7.1} MiB{heap}  meshes received {n}");
         rss.push((t, m));
     }
     rss
