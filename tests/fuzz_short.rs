@@ -19,8 +19,74 @@
 #[path = "fuzz/src/lib.rs"]
 mod targets;
 
+use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+/// The system allocator, remembering each thread's largest single
+/// request: a decoder must not allocate what an input's length field claims.
+struct Largest;
+
+thread_local! {
+    static LARGEST: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
+fn note(size: usize) {
+    // `try_with`: nothing to note while the thread is being torn down.
+    let _ = LARGEST.try_with(|l| l.set(l.get().max(size)));
+}
+
+#[allow(unsafe_code)]
+// SAFETY: forwards every call to the system allocator unchanged.
+unsafe impl GlobalAlloc for Largest {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note(layout.size());
+        // SAFETY: the caller's contract is passed on as is.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: as above.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note(new_size);
+        // SAFETY: as above.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Largest = Largest;
+
+/// The inputs libFuzzer found (`tests/fuzz/findings/`, each named after its
+/// target) are read with no allocation larger than 64 MiB: before the fix,
+/// a 4.7 kB bag made the MCAP reader reserve 2.8 GB for one topic string.
+#[test]
+fn findings_never_allocate_what_a_length_field_claims() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fuzz/findings");
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        let Some(target) = targets::TARGETS
+            .iter()
+            .find(|t| name.starts_with(&format!("{t}-")))
+        else {
+            continue;
+        };
+        let data = std::fs::read(&path).unwrap();
+        LARGEST.with(|l| l.set(0));
+        assert!(targets::run(target, &data));
+        let largest = LARGEST.with(std::cell::Cell::get);
+        println!(
+            "{name}: {} bytes, largest allocation {largest} bytes",
+            data.len()
+        );
+        assert!(largest < 64 << 20, "{name}: allocated {largest} bytes");
+        checked += 1;
+    }
+    assert!(checked >= 1, "no findings in {}", dir.display());
+}
 
 /// Seeded mutations per target and run (6 targets: 24,000 decoder calls).
 const MUTATIONS: usize = 4000;
