@@ -196,21 +196,25 @@ enum Field {
     Sized64,
     /// A `u32` byte length of `string → string` entries, each two strings.
     StrMap,
+    /// A `u32` byte length of fixed-size entries of this many bytes: the
+    /// crate reads whole entries while it has read less than the length,
+    /// so a length that is not a multiple shifts every later field.
+    Entries(usize),
 }
 
 /// The fields of each record type up to its last length-prefixed one.
 fn layout(opcode: u8) -> &'static [Field] {
-    use Field::{Fixed, Sized32, Sized64, StrMap};
+    use Field::{Entries, Fixed, Sized32, Sized64, StrMap};
     match opcode {
         0x01 => &[Sized32, Sized32],
         0x03 => &[Fixed(2), Sized32, Sized32, Sized32],
         0x04 => &[Fixed(4), Sized32, Sized32, StrMap],
         0x06 => &[Fixed(28), Sized32, Sized64],
-        0x07 => &[Fixed(2), Sized32],
-        0x08 => &[Fixed(32), Sized32, Fixed(8), Sized32],
+        0x07 => &[Fixed(2), Entries(16)],
+        0x08 => &[Fixed(32), Entries(10), Fixed(8), Sized32],
         0x09 => &[Fixed(16), Sized32, Sized32, Sized64],
         0x0A => &[Fixed(40), Sized32, Sized32],
-        0x0B => &[Fixed(42), Sized32],
+        0x0B => &[Fixed(42), Entries(10)],
         0x0C => &[Sized32, StrMap],
         0x0D => &[Fixed(16), Sized32],
         _ => &[],
@@ -252,6 +256,7 @@ pub(super) fn check_lengths(opcode: u8, body: &[u8]) -> McapResult<()> {
             Field::Sized32 => prefixed(body, at, 4),
             Field::Sized64 => prefixed(body, at, 8),
             Field::StrMap => str_map(body, at),
+            Field::Entries(size) => prefixed(body, at, 4).filter(|&end| (end - at - 4) % size == 0),
         };
         at = end.ok_or_else(|| {
             McapError::Io(std::io::Error::new(
@@ -267,8 +272,9 @@ pub(super) fn check_lengths(opcode: u8, body: &[u8]) -> McapResult<()> {
 }
 
 /// Check the length prefixes of every record of the summary section (found
-/// through the footer) before the crate's summary reader parses them. A
-/// file without a footer or a summary passes (the reader reports those).
+/// through the footer) before the crate's summary reader parses them; a
+/// record running past the footer is an error. A file without a footer or
+/// a summary passes (the reader reports those).
 fn check_summary(buf: &[u8]) -> McapResult<()> {
     // Footer: opcode, u64 length 20, summary_start, summary_offset_start,
     // crc; then the 8-byte magic.
@@ -335,6 +341,20 @@ mod tests {
         meta.extend((entries.len() as u32).to_le_bytes());
         meta.extend(entries);
         assert!(check_lengths(0x0C, &meta).is_err());
+        // A chunk index whose offsets map is not a whole number of entries
+        // (the crate would read past it and take the compression string's
+        // length from the wrong bytes).
+        let mut index = vec![0u8; 32];
+        index.extend(5u32.to_le_bytes());
+        index.extend([0u8; 5 + 8]);
+        index.extend(string(b"zstd"));
+        assert!(check_lengths(0x08, &index).is_err());
+        let mut whole = vec![0u8; 32];
+        whole.extend(10u32.to_le_bytes());
+        whole.extend([0u8; 10 + 8]);
+        whole.extend(string(b"zstd"));
+        whole.extend([0u8; 16]);
+        assert!(check_lengths(0x08, &whole).is_ok());
         // Truncated fixed fields, and an unknown opcode (nothing to check).
         assert!(check_lengths(0x0D, &[0; 10]).is_err());
         assert!(check_lengths(0x80, &[]).is_ok());
