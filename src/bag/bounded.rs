@@ -305,7 +305,10 @@ fn check_summary(buf: &[u8]) -> McapResult<()> {
             .and_then(|l| (p + 9).checked_add(l))
             .filter(|&e| e <= footer)
         else {
-            return Ok(());
+            return Err(McapError::RecordTooLarge {
+                opcode,
+                len: u64_at(p + 1).unwrap_or(u64::MAX),
+            });
         };
         check_lengths(opcode, &buf[p + 9..end])?;
         p = end;
