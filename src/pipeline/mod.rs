@@ -280,6 +280,19 @@ struct Previous {
     eta_ref: f64,
 }
 
+impl Previous {
+    /// How a segment with this centroid and size differs from this object:
+    /// the centroid's jump and the relative size change, both as fractions
+    /// of the larger size, and that size (the warm-start gate and the
+    /// re-identification of relabelled objects share it).
+    fn change_to(&self, centroid: Vec3, size: f64) -> (f64, f64, f64) {
+        let scale = self.size.max(size).max(f64::MIN_POSITIVE);
+        let moved = (centroid - self.centroid).norm() / scale;
+        let resized = (size - self.size).abs() / scale;
+        (moved, resized, scale)
+    }
+}
+
 /// The vertices (and unit normals) the next frame aligns onto: those where
 /// the membrane found a boundary (separability > 0), i.e. that lay on data.
 /// A single view's back, held where the camera never looked, is left out,
@@ -354,10 +367,7 @@ impl Tracker {
         max_motion: f64,
         max_size_change: f64,
     ) -> Option<f64> {
-        let prev = self.previous.as_ref()?;
-        let scale = prev.size.max(size).max(f64::MIN_POSITIVE);
-        let moved = (centroid - prev.centroid).norm() / scale;
-        let resized = (size - prev.size).abs() / scale;
+        let (moved, resized, _) = self.previous.as_ref()?.change_to(centroid, size);
         (moved <= max_motion && resized <= max_size_change).then_some(moved)
     }
 
@@ -616,12 +626,10 @@ impl Tracker {
         let Some(prev) = &self.previous else {
             return cold(PathReason::FirstFrame);
         };
-        let scale = prev.size.max(size).max(f64::MIN_POSITIVE);
-        let moved = (centroid - prev.centroid).norm() / scale;
+        let (moved, resized, scale) = prev.change_to(centroid, size);
         if moved > cfg.max_motion {
             return cold(PathReason::Moved { fraction: moved });
         }
-        let resized = (size - prev.size).abs() / scale;
         if resized > cfg.max_size_change {
             return cold(PathReason::Resized { fraction: resized });
         }
