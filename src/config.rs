@@ -179,10 +179,17 @@ impl Config {
             let user = parse_text(&text, &ext, &origin)?;
             merge(&mut merged, user, &mut String::new(), &origin)?;
         }
-        for set in sets {
-            apply_override(&mut merged, set)?;
-        }
-        serde_json::from_value(merged).map_err(|e| ConfigError::Invalid(e.to_string()))
+        with_overrides(merged, sets)
+    }
+
+    /// This configuration with the `sets` overrides (`section.key=value`, as
+    /// `--set` takes them) applied.
+    ///
+    /// # Errors
+    /// [`ConfigError`] naming the key or value at fault.
+    pub fn with_sets(&self, sets: &[String]) -> Result<Self, ConfigError> {
+        let value = serde_json::to_value(self).map_err(|e| ConfigError::Invalid(e.to_string()))?;
+        with_overrides(value, sets)
     }
 
     /// The embedded defaults.
@@ -209,6 +216,14 @@ impl Config {
         )?
         .with_collision_objects(self.node.outputs.collision_objects.clone()))
     }
+}
+
+/// `merged` with the `sets` overrides applied, as a [`Config`].
+fn with_overrides(mut merged: Value, sets: &[String]) -> Result<Config, ConfigError> {
+    for set in sets {
+        apply_override(&mut merged, set)?;
+    }
+    serde_json::from_value(merged).map_err(|e| ConfigError::Invalid(e.to_string()))
 }
 
 fn parse_text(text: &str, ext: &str, origin: &str) -> Result<Value, ConfigError> {

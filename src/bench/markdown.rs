@@ -2,6 +2,7 @@
 //! section, laid out like the paper's Table 1 (Chamfer-L1, F-score, normal
 //! consistency, time).
 
+use super::mechanisms::Mechanisms;
 use super::{BenchReport, RunResult, Summary};
 use std::fmt::Write;
 
@@ -55,6 +56,60 @@ fn summary_table(out: &mut String, title: &str, rows: &[Summary]) {
             f3(s.fscore),
             f3(s.normal_consistency),
             s.time_ms
+        );
+    }
+}
+
+fn signed(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:+.4}")
+    } else {
+        "-".into()
+    }
+}
+
+fn mechanisms_table(out: &mut String, m: &Mechanisms) {
+    let _ = writeln!(
+        out,
+        "\n## Mechanism ablation: ΔF = F(switched) − F(baseline)\n\nTable 1: {} shapes ({}), {} points, four conditions; sweep: six σ; replays: {} synth sequences of {} frames ({}). `≤ {}`: no |ΔF| above {} (removal candidate).\n",
+        m.table1_shapes.len(),
+        m.table1_shapes.join(", "),
+        m.table1_points,
+        m.replays.len(),
+        m.replay_frames,
+        m.replays.join(", "),
+        m.threshold,
+        m.threshold
+    );
+    let _ = writeln!(
+        out,
+        "| switch | ΔF Table 1 genus 0 | ΔF Table 1 genus > 0 | ΔF sweep | ΔF replays | failed | ≤ {} |",
+        m.threshold
+    );
+    let _ = writeln!(out, "|---|---|---|---|---|---|---|");
+    for r in &m.rows {
+        let cells: Vec<String> = if r.switch == "baseline" {
+            r.figures
+                .values()
+                .iter()
+                .map(|v| format!("F {}", f4(*v)))
+                .collect()
+        } else {
+            r.delta.values().iter().map(|v| signed(*v)).collect()
+        };
+        let _ = writeln!(
+            out,
+            "| `{}` | {} | {} | {} |",
+            r.switch,
+            cells.join(" | "),
+            r.failed,
+            if r.switch == "baseline" {
+                ""
+            } else if r.below_threshold {
+                "yes"
+            } else {
+                "no"
+            }
         );
     }
 }
@@ -216,6 +271,9 @@ pub fn render(rep: &BenchReport) -> String {
                 let _ = writeln!(out, "| {p} | {ms:.1} |");
             }
         }
+    }
+    if let Some(m) = &rep.mechanisms {
+        mechanisms_table(&mut out, m);
     }
     if !rep.skipped.is_empty() {
         let _ = writeln!(out, "\n## Skipped\n");

@@ -17,11 +17,13 @@
 //! | `ablation` | weighted separability (Eq. 9): spatial / intensity / density and their combinations, white object points and dark outliers |
 //! | `real` | real scans: the PCL bunny scan against its mesh; the mOSD tabletop objects without ground truth |
 //! | `speed` | cold reconstruction of a 20,000-point object on one thread: median time and per-phase breakdown |
+//! | `ablation-mechanisms` | every optional mechanism switched in turn: ΔF on Table 1 (genus 0, genus > 0), the sweep and nine synth replays ([`mechanisms`]); only when named in `--only` |
 //!
 //! Missing datasets are reported as skips, never as failures.
 
 pub mod clouds;
 pub mod markdown;
+pub mod mechanisms;
 
 use crate::cloud::{Aabb, PointCloud, Vec3};
 use crate::config::{Config, ConfigError};
@@ -57,8 +59,16 @@ pub enum BenchError {
         message: String,
     },
     /// `--only` named something that is neither a section nor a shape.
-    #[error("bench: --only `{0}` is neither a section (table1, sweep, adaptive, ablation, real, speed) nor a Table 1 shape")]
+    #[error("bench: --only `{0}` is neither a section (table1, sweep, adaptive, ablation, real, speed, ablation-mechanisms) nor a Table 1 shape")]
     UnknownSelection(String),
+    /// A synth replay of the mechanism ablation could not be written or replayed.
+    #[error("bench: synth replay {what}: {message}")]
+    Replay {
+        /// The sequence (or folder).
+        what: String,
+        /// The error.
+        message: String,
+    },
 }
 
 /// F-score threshold τ in the unit frame (1 % of the longest edge).
@@ -68,7 +78,18 @@ pub const F_SCORE_TAU: f64 = 0.01;
 pub const METRIC_SAMPLES: usize = 100_000;
 
 /// The sections of the benchmark.
-pub const SECTIONS: [&str; 6] = ["table1", "sweep", "adaptive", "ablation", "real", "speed"];
+pub const SECTIONS: [&str; 7] = [
+    "table1",
+    "sweep",
+    "adaptive",
+    "ablation",
+    "real",
+    "speed",
+    mechanisms::SECTION,
+];
+
+/// Sections that run only when `--only` names them (not in the full run).
+pub const OPT_IN_SECTIONS: [&str; 1] = [mechanisms::SECTION];
 
 /// The base seed of `sepmem bench` unless `--seed` gives another.
 pub const DEFAULT_SEED: u64 = 20250307;
@@ -109,7 +130,11 @@ impl BenchOptions {
             .iter()
             .filter(|o| SECTIONS.contains(&o.as_str()))
             .collect();
-        sections.is_empty() || sections.iter().any(|s| s.as_str() == key)
+        if sections.is_empty() {
+            !OPT_IN_SECTIONS.contains(&key)
+        } else {
+            sections.iter().any(|s| s.as_str() == key)
+        }
     }
 
     fn shape_filter(&self) -> Vec<&str> {
@@ -350,6 +375,8 @@ pub struct BenchReport {
     pub real: Option<Vec<RealRow>>,
     /// Speed.
     pub speed: Option<Speed>,
+    /// The mechanism ablation (only when asked for).
+    pub mechanisms: Option<mechanisms::Mechanisms>,
     /// Shapes, files or sections skipped, with the reason.
     pub skipped: Vec<Skip>,
 }
@@ -1115,6 +1142,9 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(&str)) -> Result<BenchReport
     if opts.section_selected("speed") {
         rep.speed = Some(speed(opts, &mut skipped, log)?);
     }
+    if opts.section_selected(mechanisms::SECTION) {
+        rep.mechanisms = Some(mechanisms::run(opts, &mut skipped, log)?);
+    }
     rep.skipped = skipped;
     rep.total_s = t0.elapsed().as_secs_f64();
     Ok(rep)
@@ -1205,6 +1235,17 @@ mod tests {
             "{:?}",
             skipped[0]
         );
+    }
+
+    #[test]
+    fn the_mechanism_ablation_runs_only_when_named() {
+        let mut o = BenchOptions::new(true, None).unwrap();
+        assert!(o.section_selected("table1"));
+        assert!(!o.section_selected(mechanisms::SECTION));
+        o.only = vec![mechanisms::SECTION.into(), "sphere".into()];
+        assert!(o.section_selected(mechanisms::SECTION));
+        assert!(!o.section_selected("table1"));
+        assert_eq!(o.shape_filter(), ["sphere"]);
     }
 
     #[test]
