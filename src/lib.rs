@@ -44,6 +44,7 @@ pub mod config;
 pub mod density;
 pub mod error;
 pub mod eval;
+pub mod gnomonic;
 pub mod io;
 pub mod membrane;
 pub mod mesh;

@@ -99,17 +99,7 @@ mod tests {
 
     #[test]
     fn sphere_normals_are_radial_and_plane_normals_vertical() {
-        // Fibonacci sphere.
-        let n = 2000;
-        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-        let pts: Vec<Vec3> = (0..n)
-            .map(|i| {
-                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-                let r = (1.0 - z * z).sqrt();
-                let t = golden * i as f64;
-                Vec3::new(r * t.cos(), r * t.sin(), z)
-            })
-            .collect();
+        let pts = crate::shapes::fibonacci_sphere(2000);
         let normals = estimate_normals(&pts, 10).unwrap();
         let worst = pts
             .iter()

@@ -108,6 +108,21 @@ fn check_res(shape: &'static str, got: usize, min: usize) -> Result<(), ShapeErr
     }
 }
 
+/// `n` points of the Fibonacci lattice on the unit sphere about the origin
+/// (a golden-angle spiral over equal-area latitude bands): nearly uniform,
+/// for the tests and seeds that need points on a sphere rather than a mesh.
+pub fn fibonacci_sphere(n: usize) -> Vec<Vec3> {
+    let golden = PI * (3.0 - 5f64.sqrt());
+    (0..n)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - z * z).sqrt();
+            let t = golden * i as f64;
+            Vec3::new(r * t.cos(), r * t.sin(), z)
+        })
+        .collect()
+}
+
 /// Centre `mesh` on its bounding-box centre and scale it to a unit longest
 /// edge. Returns the scale factor applied (1 for an empty or flat-zero mesh).
 pub fn normalise_unit_longest_edge(mesh: &mut TriMesh) -> f64 {

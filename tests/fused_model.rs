@@ -20,15 +20,10 @@ const R: f64 = 0.1;
 /// the origin, sphere at z = 0.8) for which `keep(x, y)` holds.
 fn cap(keep: impl Fn(f64, f64) -> bool) -> Vec<Vec3> {
     let c = Vec3::new(0.0, 0.0, 0.8);
-    let n = 12_000;
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    (0..n)
-        .map(|i| {
-            let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-            let r = (1.0 - y * y).sqrt();
-            let t = golden * i as f64;
-            Vec3::new(r * t.cos(), y, r * t.sin())
-        })
+    // The lattice with its pole axis along y.
+    sepmem::shapes::fibonacci_sphere(12_000)
+        .into_iter()
+        .map(|u| Vec3::new(u.x, u.z, u.y))
         .filter(|d| d.z < -0.3)
         .map(|d| c + d * R)
         .filter(|p| keep(p.x, p.y))

@@ -166,6 +166,10 @@ struct Receipts {
     /// numbers each publisher's samples from 1, so the gaps are the meshes
     /// the transport dropped (zenoh drops under congestion, silently).
     sequences: BTreeMap<String, Sequences>,
+    /// Since the last memory sample, healthy meshes: count, control-grid
+    /// cells (M·L) and vertices summed — surfaces that grow over the run
+    /// hold more memory in the node's caches and outputs.
+    sizes: (u64, u64, u64),
 }
 
 impl Receipts {
@@ -179,6 +183,7 @@ impl Receipts {
                 .context("latency histogram")?,
             iterations: (0, 0, 0),
             sequences: BTreeMap::new(),
+            sizes: (0, 0, 0),
         })
     }
 
@@ -193,6 +198,14 @@ impl Receipts {
                     it.0 + 1,
                     it.1 + u64::from(m.iterations),
                     it.2 + u64::from(m.iterations == 0),
+                );
+            }
+            if let (Some(m), true) = (msg, idx < self.streams) {
+                let z = &mut self.sizes;
+                *z = (
+                    z.0 + 1,
+                    z.1 + u64::from(m.grid_m) * u64::from(m.grid_l),
+                    z.2 + m.vertices.len() as u64,
                 );
             }
             if idx < self.streams {
@@ -437,11 +450,19 @@ async fn sample_rss(
         .await;
         let t = (now_ns() - t0) as f64 * 1e-9;
         let m = rss_mib().unwrap_or(f64::NAN);
-        let n = receipts.lock().map(|r| r.total).unwrap_or(0);
+        let (n, (k, cells, verts)) = receipts
+            .lock()
+            .map(|mut r| (r.total, std::mem::take(&mut r.sizes)))
+            .unwrap_or_default();
+        let per = |x: u64| x as f64 / k.max(1) as f64;
         let heap = heap_mib().map_or_else(String::new, |(used, all)| {
             format!("  heap in use {used:7.1} of {all:7.1} MiB")
         });
-        println!("  t={t:6.1} s  rss {m:7.1} MiB{heap}  meshes received {n}");
+        println!(
+            "  t={t:6.1} s  rss {m:7.1} MiB{heap}  meshes received {n}  healthy grid cells {:.0}, vertices {:.0}",
+            per(cells),
+            per(verts)
+        );
         rss.push((t, m));
     }
     rss

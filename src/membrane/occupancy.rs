@@ -259,15 +259,7 @@ mod tests {
 
     #[test]
     fn sphere_interior_is_inside_and_far_space_outside() {
-        let mut pts = Vec::new();
-        let n = 4000;
-        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-        for i in 0..n {
-            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-            let r = (1.0 - z * z).sqrt();
-            let th = golden * i as f64;
-            pts.push(Vec3::new(r * th.cos(), r * th.sin(), z));
-        }
+        let pts = crate::shapes::fibonacci_sphere(4000);
         let g = OutsideGrid::new(&pts, 0.1, 11, 1 << 20).unwrap();
         assert!(!g.is_outside(&Vec3::zeros()));
         assert!(!g.is_outside(&Vec3::new(0.5, 0.0, 0.0)));

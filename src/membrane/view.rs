@@ -35,6 +35,7 @@
 
 use super::occupancy::OutsideGrid;
 use crate::cloud::{Aabb, Vec3};
+use crate::gnomonic::{RangeImage, ViewFrame};
 use serde::{Deserialize, Serialize};
 
 /// Least distance of an auto-detected viewpoint from the cloud's bounding
@@ -79,15 +80,8 @@ pub enum ViewMode {
 /// on the plane perpendicular to the mean view direction).
 #[derive(Debug, Clone)]
 pub struct ViewBuffer {
-    eye: Vec3,
-    dir: Vec3,
-    u: Vec3,
-    w: Vec3,
-    lo: [f64; 2],
-    inv_bin: f64,
-    dims: [usize; 2],
     /// Nearest range per bin (`INFINITY` where nothing was seen).
-    near: Vec<f64>,
+    image: RangeImage<f64>,
     margin: f64,
     /// Depth (along the view direction) beyond which nothing of the object
     /// lies: the back of the completion (`INFINITY` without one).
@@ -103,26 +97,19 @@ impl ViewBuffer {
             return None;
         }
         let centroid = points.iter().sum::<Vec3>() / points.len() as f64;
-        let dir = (centroid - eye).try_normalize(1e-12)?;
-        let helper = if dir.x.abs() < 0.9 {
-            Vec3::x()
-        } else {
-            Vec3::y()
-        };
-        let u = dir.cross(&helper).normalize();
-        let w = dir.cross(&u);
+        let frame = ViewFrame::looking_at(eye, centroid)?;
         let cos_min = 10f64.to_radians().sin();
         let mut ranges = Vec::with_capacity(points.len());
         let mut lo = [f64::INFINITY; 2];
         let mut hi = [f64::NEG_INFINITY; 2];
         for p in points {
-            let d = p - eye;
-            let r = d.norm();
-            let along = d.dot(&dir);
+            let r = frame.range(p);
+            let along = frame.depth(p);
             if r.is_nan() || r <= 0.0 || along < cos_min * r {
                 return None;
             }
-            let a = [d.dot(&u) / along, d.dot(&w) / along];
+            let [a0, a1] = frame.lateral(p);
+            let a = [a0 / along, a1 / along];
             for k in 0..2 {
                 lo[k] = lo[k].min(a[k]);
                 hi[k] = hi[k].max(a[k]);
@@ -133,88 +120,53 @@ impl ViewBuffer {
         let mid = sorted.len() / 2;
         let (_, median_r, _) = sorted.select_nth_unstable_by(mid, f64::total_cmp);
         let mut bin = BIN_DELTA * delta / median_r.max(f64::MIN_POSITIVE);
-        let mut dims;
         loop {
-            dims = [
-                ((hi[0] - lo[0]) / bin).ceil() as usize + 3,
-                ((hi[1] - lo[1]) / bin).ceil() as usize + 3,
-            ];
+            let dims = RangeImage::<f64>::dims_for(lo, hi, bin);
             if dims[0] <= MAX_SIDE && dims[1] <= MAX_SIDE {
                 break;
             }
             bin *= 1.5;
         }
-        let lo = [lo[0] - bin, lo[1] - bin];
-        let mut vb = Self {
-            eye,
-            dir,
-            u,
-            w,
-            lo,
-            inv_bin: 1.0 / bin,
-            dims,
-            near: vec![f64::INFINITY; dims[0] * dims[1]],
-            margin: MARGIN_DELTA * delta,
-            back: f64::INFINITY,
-        };
+        let mut image = RangeImage::new(frame, lo, hi, bin);
         for (p, &r) in points.iter().zip(&ranges) {
-            if let Some(c) = vb.cell(p) {
-                vb.near[c] = vb.near[c].min(r);
+            if let Some(c) = image.cell(p) {
+                image.record(c, r);
             }
         }
-        Some(vb)
+        Some(Self {
+            image,
+            margin: MARGIN_DELTA * delta,
+            back: f64::INFINITY,
+        })
     }
 
     /// The viewpoint.
     pub fn eye(&self) -> Vec3 {
-        self.eye
+        self.image.frame().eye()
     }
 
-    /// Bin of `p` (`None` when behind the eye or beyond the buffer).
-    fn cell(&self, p: &Vec3) -> Option<usize> {
-        let d = p - self.eye;
-        let along = d.dot(&self.dir);
-        if along <= 0.0 {
-            return None;
-        }
-        let x = ((d.dot(&self.u) / along - self.lo[0]) * self.inv_bin).floor();
-        let y = ((d.dot(&self.w) / along - self.lo[1]) * self.inv_bin).floor();
-        if !(x >= 0.0 && y >= 0.0) {
-            return None;
-        }
-        let (x, y) = (x as usize, y as usize);
-        (x < self.dims[0] && y < self.dims[1]).then_some(y * self.dims[0] + x)
+    fn frame(&self) -> &ViewFrame {
+        self.image.frame()
     }
 
     /// Nearest seen range in the direction of `p` over its bin and the 8
     /// around it (`INFINITY` when nothing was seen there).
     fn nearest_seen(&self, p: &Vec3) -> f64 {
-        let Some(c) = self.cell(p) else {
-            return f64::INFINITY;
-        };
-        let (x, y) = (c % self.dims[0], c / self.dims[0]);
-        let mut best = f64::INFINITY;
-        for yy in y.saturating_sub(1)..=(y + 1).min(self.dims[1] - 1) {
-            for xx in x.saturating_sub(1)..=(x + 1).min(self.dims[0] - 1) {
-                best = best.min(self.near[yy * self.dims[0] + xx]);
-            }
-        }
-        best
+        self.image.nearest_around(p).unwrap_or(f64::INFINITY)
     }
 
     /// True when the camera saw through `p`: it is nearer than the surface
     /// seen in its direction (by more than the margin), or nothing was seen
     /// in its direction.
     pub fn is_seen_free(&self, p: &Vec3) -> bool {
-        let r = (p - self.eye).norm();
-        r + self.margin < self.nearest_seen(p)
+        self.frame().range(p) + self.margin < self.nearest_seen(p)
     }
 
     /// Set the back of the object to the deepest of `points` (the
     /// completion): space beyond it counts as outside.
     pub fn set_back<'a>(&mut self, points: impl Iterator<Item = &'a Vec3>) {
         let deepest = points
-            .map(|q| (q - self.eye).dot(&self.dir))
+            .map(|q| self.frame().depth(q))
             .fold(f64::NEG_INFINITY, f64::max);
         if deepest.is_finite() {
             self.back = deepest + self.margin;
@@ -223,13 +175,13 @@ impl ViewBuffer {
 
     /// True when `p` lies deeper than the back of the completion.
     pub fn is_beyond_back(&self, p: &Vec3) -> bool {
-        (p - self.eye).dot(&self.dir) > self.back
+        self.frame().depth(p) > self.back
     }
 
     /// True when `p` lies behind the seen surface (by more than the margin).
     pub fn is_occluded(&self, p: &Vec3) -> bool {
         let near = self.nearest_seen(p);
-        near.is_finite() && (p - self.eye).norm() > near + self.margin
+        near.is_finite() && self.frame().range(p) > near + self.margin
     }
 
     /// Fraction of occupied bins (with at least two points) holding two
@@ -237,7 +189,7 @@ impl ViewBuffer {
     fn two_layer_fraction(&self, points: &[Vec3], gap: f64) -> f64 {
         let mut keyed: Vec<(usize, f64)> = points
             .iter()
-            .filter_map(|p| self.cell(p).map(|c| (c, (p - self.eye).norm())))
+            .filter_map(|p| self.image.cell(p).map(|c| (c, self.frame().range(p))))
             .collect();
         keyed.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
         let (mut bins, mut layered) = (0usize, 0usize);
@@ -279,10 +231,11 @@ impl ViewBuffer {
             let (_, hi, _) = v.select_nth_unstable_by(hi_i, f64::total_cmp);
             (lo, *hi)
         };
-        let depth = |p: &Vec3| (p - self.eye).dot(&self.dir);
+        let f = self.frame();
+        let depth = |p: &Vec3| f.depth(p);
         let (z0, z1) = quantiles(points.iter().map(depth).collect());
-        let (u0, u1) = quantiles(points.iter().map(|p| (p - self.eye).dot(&self.u)).collect());
-        let (w0, w1) = quantiles(points.iter().map(|p| (p - self.eye).dot(&self.w)).collect());
+        let (u0, u1) = quantiles(points.iter().map(|p| f.lateral(p)[0]).collect());
+        let (w0, w1) = quantiles(points.iter().map(|p| f.lateral(p)[1]).collect());
         let lateral = (u1 - u0).min(w1 - w0);
         let plane = z0 + (z1 - z0).max(0.5 * lateral);
         points
@@ -293,7 +246,7 @@ impl ViewBuffer {
                 if z >= plane {
                     return None;
                 }
-                let q = p + self.dir * (2.0 * (plane - z));
+                let q = p + f.dir() * (2.0 * (plane - z));
                 self.is_occluded(&q).then_some((q, i))
             })
             .collect()
@@ -340,14 +293,9 @@ mod tests {
 
     /// Fibonacci sphere of `n` points, radius `r`, centre `c`.
     fn sphere(n: usize, r: f64, c: Vec3) -> Vec<Vec3> {
-        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-        (0..n)
-            .map(|i| {
-                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-                let s = (1.0 - z * z).sqrt();
-                let t = golden * i as f64;
-                c + Vec3::new(s * t.cos(), s * t.sin(), z) * r
-            })
+        crate::shapes::fibonacci_sphere(n)
+            .into_iter()
+            .map(|u| c + u * r)
             .collect()
     }
 

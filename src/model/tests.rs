@@ -6,15 +6,9 @@ use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
 /// Points and outward normals on a sphere of radius `r` (object frame).
 fn sphere(r: f64, n: usize) -> Vec<(Vec3, Vec3)> {
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    (0..n)
-        .map(|i| {
-            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-            let s = (1.0 - z * z).sqrt();
-            let t = golden * i as f64;
-            let u = Vec3::new(s * t.cos(), s * t.sin(), z);
-            (u * r, u)
-        })
+    crate::shapes::fibonacci_sphere(n)
+        .into_iter()
+        .map(|u| (u * r, u))
         .collect()
 }
 

@@ -18,6 +18,7 @@
 
 use crate::cloud::Vec3;
 use crate::density::Density;
+use crate::gnomonic::{RangeImage, ViewFrame};
 
 /// Depth-image bin edge, in point spacings δ at the view's mean range.
 pub const BIN_DELTA: f64 = 2.0;
@@ -25,15 +26,8 @@ pub const BIN_DELTA: f64 = 2.0;
 /// One view's angular depth image, in the object's frame.
 #[derive(Debug, Clone)]
 pub struct DepthView {
-    eye: Vec3,
-    dir: Vec3,
-    u: Vec3,
-    w: Vec3,
-    lo: [f64; 2],
-    inv_bin: f64,
-    dims: [usize; 2],
     /// Nearest range per bin (`INFINITY` where the object was not seen).
-    near: Vec<f32>,
+    image: RangeImage<f32>,
     /// Thickness of the seen surface (metres).
     margin: f64,
 }
@@ -67,24 +61,17 @@ impl DepthView {
             return None;
         }
         let centroid = points.iter().sum::<Vec3>() / points.len() as f64;
-        let dir = (centroid - eye).try_normalize(1e-12)?;
-        let helper = if dir.x.abs() < 0.9 {
-            Vec3::x()
-        } else {
-            Vec3::y()
-        };
-        let u = dir.cross(&helper).normalize();
-        let w = dir.cross(&u);
+        let frame = ViewFrame::looking_at(eye, centroid)?;
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         let mut range_sum = 0.0;
         for p in points {
-            let d = p - eye;
-            let along = d.dot(&dir);
+            let along = frame.depth(p);
             // Also false for a NaN coordinate.
-            if along.is_nan() || along <= 0.2 * d.norm() {
+            if along.is_nan() || along <= 0.2 * frame.range(p) {
                 return None;
             }
-            let a = [d.dot(&u) / along, d.dot(&w) / along];
+            let [a0, a1] = frame.lateral(p);
+            let a = [a0 / along, a1 / along];
             for k in 0..2 {
                 lo[k] = lo[k].min(a[k]);
                 hi[k] = hi[k].max(a[k]);
@@ -94,81 +81,40 @@ impl DepthView {
         let mean_range = range_sum / points.len() as f64;
         let span = (hi[0] - lo[0]).max(hi[1] - lo[1]);
         let cell = (BIN_DELTA * delta / mean_range).max(span / (max_side - 3) as f64);
-        let dims = [
-            ((hi[0] - lo[0]) / cell).ceil() as usize + 3,
-            ((hi[1] - lo[1]) / cell).ceil() as usize + 3,
-        ];
-        let mut view = Self {
-            eye,
-            dir,
-            u,
-            w,
-            lo: [lo[0] - cell, lo[1] - cell],
-            inv_bin: 1.0 / cell,
-            dims,
-            near: vec![f32::INFINITY; dims[0] * dims[1]],
-            margin: margin_delta * delta,
-        };
+        let mut image = RangeImage::new(frame, lo, hi, cell);
         for p in points {
-            if let Some(c) = view.cell(p) {
-                let r = (p - eye).norm() as f32;
-                view.near[c] = view.near[c].min(r);
+            if let Some(c) = image.cell(p) {
+                image.record(c, frame.range(p) as f32);
             }
         }
-        Some(view)
+        Some(Self {
+            image,
+            margin: margin_delta * delta,
+        })
     }
 
     /// The camera's position in the object's frame.
     pub fn eye(&self) -> Vec3 {
-        self.eye
+        self.image.frame().eye()
     }
 
     /// The view's mean direction (unit).
     pub fn direction(&self) -> Vec3 {
-        self.dir
+        self.image.frame().dir()
     }
 
     /// Bytes held by the image.
     pub fn bytes(&self) -> usize {
-        self.near.len() * std::mem::size_of::<f32>()
-    }
-
-    fn cell(&self, p: &Vec3) -> Option<usize> {
-        let d = p - self.eye;
-        let along = d.dot(&self.dir);
-        if along <= 0.0 {
-            return None;
-        }
-        let x = ((d.dot(&self.u) / along - self.lo[0]) * self.inv_bin).floor();
-        let y = ((d.dot(&self.w) / along - self.lo[1]) * self.inv_bin).floor();
-        if !(x >= 0.0 && y >= 0.0) {
-            return None;
-        }
-        let (x, y) = (x as usize, y as usize);
-        (x < self.dims[0] && y < self.dims[1]).then_some(y * self.dims[0] + x)
-    }
-
-    /// The nearest range seen over the bin of `p` and its 8 neighbours
-    /// (`None` outside the field; `INFINITY` where nothing was seen).
-    fn seen_range(&self, p: &Vec3) -> Option<f64> {
-        let c = self.cell(p)?;
-        let (x, y) = (c % self.dims[0], c / self.dims[0]);
-        let mut best = f32::INFINITY;
-        for yy in y.saturating_sub(1)..=(y + 1).min(self.dims[1] - 1) {
-            for xx in x.saturating_sub(1)..=(x + 1).min(self.dims[0] - 1) {
-                best = best.min(self.near[yy * self.dims[0] + xx]);
-            }
-        }
-        Some(f64::from(best))
+        self.image.len() * std::mem::size_of::<f32>()
     }
 
     /// What this view says of `p`.
     pub fn evidence(&self, p: &Vec3) -> Evidence {
         let margin = self.margin;
-        let Some(seen) = self.seen_range(p) else {
+        let Some(seen) = self.image.nearest_around(p).map(f64::from) else {
             return Evidence::Unknown;
         };
-        let r = (p - self.eye).norm();
+        let r = self.image.frame().range(p);
         if seen.is_infinite() {
             Evidence::OutsideSilhouette
         } else if r + margin < seen {
@@ -256,14 +202,8 @@ mod tests {
 
     /// The front cap of a unit sphere at the origin seen from `eye`.
     fn visible_cap(eye: Vec3, n: usize) -> Vec<Vec3> {
-        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-        (0..n)
-            .map(|i| {
-                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-                let r = (1.0 - z * z).sqrt();
-                let t = golden * i as f64;
-                Vec3::new(r * t.cos(), r * t.sin(), z)
-            })
+        crate::shapes::fibonacci_sphere(n)
+            .into_iter()
             .filter(|p| (eye - p).dot(p) > 0.0)
             .collect()
     }
