@@ -37,6 +37,14 @@ impl OutputKind {
         OutputKind::FrameDiagnostics,
         OutputKind::CollisionObjects,
     ];
+
+    /// Whether one message of this kind carries the whole frame (every
+    /// object's marker after a DELETEALL; the frame's diagnostics), so
+    /// that its last message is all a late joiner needs. Mesh and
+    /// collision-object messages are one per object.
+    pub fn whole_frame(self) -> bool {
+        matches!(self, OutputKind::Markers | OutputKind::FrameDiagnostics)
+    }
 }
 
 /// One encoded output message.

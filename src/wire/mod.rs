@@ -95,6 +95,11 @@ pub enum WireError {
 /// longer than `u32::MAX`).
 pub fn encode_into<M: RosMessage>(msg: &M, buf: &mut Vec<u8>) -> Result<(), WireError> {
     buf.clear();
+    // One allocation of the exact size: growing by doubling left up to
+    // twice the message in every encoded output a publisher cache holds,
+    // and a chain of freed halves behind each (heap fragmentation).
+    let size = usize::try_from(cdr::calc_serialized_size(msg)).unwrap_or(0);
+    buf.reserve_exact(size);
     cdr::serialize_into::<_, _, _, cdr::CdrLe>(&mut *buf, msg, cdr::Infinite).map_err(|e| {
         WireError::Encode {
             type_name: M::TYPE_NAME.to_string(),
@@ -140,6 +145,30 @@ pub fn dds_type_name(type_name: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_encoded_message_holds_no_spare_capacity() {
+        use msgs::{Header, Point, SurfaceMesh};
+        let mesh = SurfaceMesh {
+            header: Header::default(),
+            stream_id: "/a/points#7".into(),
+            vertices: (0..5000)
+                .map(|i| Point {
+                    x: f64::from(i),
+                    y: 0.5,
+                    z: -1.0,
+                })
+                .collect(),
+            vertex_separability: vec![0.25; 5000],
+            start_reason: "tracked".into(),
+            ..SurfaceMesh::default()
+        };
+        let bytes = encode(&mesh).unwrap();
+        // Odd-length strings before 8-byte-aligned doubles: the size
+        // includes the padding, so the one allocation is exact.
+        assert_eq!(bytes.capacity(), bytes.len());
+        assert_eq!(decode::<SurfaceMesh>(&bytes).unwrap(), mesh);
+    }
 
     #[test]
     fn dds_names() {
