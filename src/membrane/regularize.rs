@@ -207,6 +207,10 @@ mod tests {
         }
     }
 
+    fn samples(outs: &[SampleOut], un: usize, vn: usize) -> Samples<'_> {
+        Samples { outs, un, vn }
+    }
+
     #[test]
     fn skipped_samples_take_the_median_shift_of_their_moving_neighbours() {
         // 4 × 3 samples (u periodic), checkerboard: (i + j) odd skipped.
