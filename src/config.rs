@@ -18,8 +18,7 @@
 //! A key that does not exist in the defaults is an error that names it, so a
 //! typo never silently falls back to a default. A key that was renamed (the
 //! flat `membrane` keys before the section moved into one sub-section per
-//! module) is an error that names its new key ([`RENAMED`]); a key whose
-//! mechanism was removed is an error that says so and why ([`REMOVED`]).
+//! module) is an error that names its new key ([`RENAMED`]).
 
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
@@ -67,16 +66,6 @@ pub enum ConfigError {
         new: &'static str,
         /// How the value changed, if it did (starts with "; ").
         note: String,
-        /// Where it came from.
-        origin: String,
-    },
-    /// A key whose mechanism was removed: the error says why.
-    #[error("parameter `{key}` in {origin} was removed: {why} (see launch/sepmem.json5)")]
-    RemovedKey {
-        /// The dotted key.
-        key: String,
-        /// Why it was removed.
-        why: &'static str,
         /// Where it came from.
         origin: String,
     },
@@ -136,6 +125,7 @@ pub const RENAMED: &[(&str, &str, &str)] = &[
     ("membrane.median_filter", "membrane.regularize.median_filter", ""),
     ("membrane.pole_tension", "membrane.regularize.pole_tension.strength", "now part of the object regularize.pole_tension { strength, rows }, which null turns off (not 0)"),
     ("membrane.pole_tension_rows", "membrane.regularize.pole_tension.rows", ""),
+    ("membrane.warm_back_smoothing", "membrane.regularize.warm_back_smoothing", "null turns it off, not 0"),
     ("membrane.depth_start", "membrane.schedule.depth_start", ""),
     ("membrane.depth_warm", "membrane.schedule.depth_warm", ""),
     ("membrane.depth_decay", "membrane.schedule.depth_decay", ""),
@@ -147,20 +137,6 @@ pub const RENAMED: &[(&str, &str, &str)] = &[
     ("membrane.viewpoint", "membrane.view.viewpoint", ""),
     ("membrane.view_completion", "membrane.view.completion", "\"none\" or \"mirror\", not a boolean"),
 ];
-
-/// Removed keys: the dotted key and why its mechanism was removed.
-/// Consulted, like [`RENAMED`], where an unknown key is reported.
-pub const REMOVED: &[(&str, &str)] = &[
-    (
-        "membrane.regularize.warm_back_smoothing",
-        WARM_BACK_SMOOTHING,
-    ),
-    ("membrane.warm_back_smoothing", WARM_BACK_SMOOTHING),
-];
-
-const WARM_BACK_SMOOTHING: &str = "the occluded-back smoothing of warm single views changed no \
-     figure of `sepmem bench --only ablation-mechanisms` by more than 0.003 \
-     (docs/ablation-mechanisms.md); delete the key";
 
 /// Every sepmem parameter. Sections are documented in `launch/sepmem.json5`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -290,16 +266,8 @@ fn merge(
 }
 
 /// The error for a key missing from the defaults: [`ConfigError::RenamedKey`]
-/// when [`RENAMED`] lists it, [`ConfigError::RemovedKey`] when [`REMOVED`]
-/// does, [`ConfigError::UnknownKey`] otherwise.
+/// when [`RENAMED`] lists it, [`ConfigError::UnknownKey`] otherwise.
 fn unknown_key(key: &str, origin: &str) -> ConfigError {
-    if let Some(&(_, why)) = REMOVED.iter().find(|(removed, _)| *removed == key) {
-        return ConfigError::RemovedKey {
-            key: key.to_string(),
-            why,
-            origin: origin.to_string(),
-        };
-    }
     match RENAMED.iter().find(|(old, _, _)| *old == key) {
         Some(&(_, new, note)) => ConfigError::RenamedKey {
             old: key.to_string(),
@@ -382,36 +350,6 @@ mod tests {
     }
 
     #[test]
-    fn removed_keys_are_errors_that_say_they_were_removed() {
-        for set in [
-            "membrane.regularize.warm_back_smoothing=0.5",
-            "membrane.regularize.warm_back_smoothing=null",
-            "membrane.warm_back_smoothing=0.5",
-        ] {
-            let err = Config::load(None, &[set.into()]).unwrap_err();
-            assert!(matches!(err, ConfigError::RemovedKey { .. }), "{err}");
-            let key = set.split('=').next().unwrap();
-            let text = err.to_string();
-            assert!(text.contains(&format!("`{key}`")), "{text}");
-            assert!(text.contains("was removed"), "{text}");
-        }
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("old.json5");
-        std::fs::write(
-            &path,
-            "{ membrane: { regularize: { median_filter: true, warm_back_smoothing: 0.5 } } }",
-        )
-        .unwrap();
-        let text = Config::load(Some(&path), &[]).unwrap_err().to_string();
-        assert!(
-            text.contains("`membrane.regularize.warm_back_smoothing`")
-                && text.contains("old.json5")
-                && text.contains("was removed"),
-            "{text}"
-        );
-    }
-
-    #[test]
     fn every_old_key_is_gone_and_every_new_key_exists() {
         let defaults = serde_json::to_value(Config::defaults().unwrap()).unwrap();
         let at = |key: &str| {
@@ -421,9 +359,6 @@ mod tests {
         for (old, new, _) in RENAMED {
             assert!(at(old).is_none(), "{old} still exists");
             assert!(at(new).is_some(), "{new} does not exist");
-        }
-        for (removed, _) in REMOVED {
-            assert!(at(removed).is_none(), "{removed} still exists");
         }
     }
 

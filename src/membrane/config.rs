@@ -270,6 +270,10 @@ pub struct RegularizeConfig {
     /// Tension near the poles on samples without a data force (whole
     /// objects); `None` turns it off.
     pub pole_tension: Option<PoleTensionConfig>,
+    /// Warm-started single views: smoothing of the occluded back without a
+    /// data force (the fraction of the mean-free umbrella step); `None`
+    /// turns it off.
+    pub warm_back_smoothing: Option<f64>,
 }
 
 impl Default for RegularizeConfig {
@@ -277,6 +281,7 @@ impl Default for RegularizeConfig {
         Self {
             median_filter: true,
             pole_tension: Some(PoleTensionConfig::default()),
+            warm_back_smoothing: Some(0.5),
         }
     }
 }
@@ -579,6 +584,11 @@ fn validate_regularize(r: &RegularizeConfig) -> Result<(), ConfigError> {
         r.pole_tension.as_ref().is_none_or(|t| in_unit(t.strength)),
         "regularize.pole_tension.strength",
         "must be in (0, 1] (null turns the tension off)",
+    )?;
+    check(
+        r.warm_back_smoothing.is_none_or(in_unit),
+        "regularize.warm_back_smoothing",
+        "must be in (0, 1] (null turns it off)",
     )
 }
 

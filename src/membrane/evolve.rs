@@ -67,6 +67,7 @@ struct Buffers {
     shifts: Vec<f64>,
     targets: Vec<Vec3>,
     arc: Vec<f64>,
+    regularize: regularize::Scratch,
     /// Per-sample η* of the last iteration and its grid: the output's
     /// per-vertex separability when the grid did not change after it.
     last_eta: Vec<f64>,
@@ -145,7 +146,15 @@ pub(crate) fn evolve(
         b.last_eta.extend(b.outs.iter().map(|o| o.eta));
         b.last_eta_grid = [m, l];
         times.search_ms += ms(t_search);
-        move_and_refit(prep, cfg, &mut surface, fit, &mut b, &mut times)?;
+        move_and_refit(
+            prep,
+            cfg,
+            warm.is_some(),
+            &mut surface,
+            fit,
+            &mut b,
+            &mut times,
+        )?;
         let next = schedule.next(eta_g, sparse, [m, l], &b.outs, &b.shifts);
         if let Next::Grow([nm, nl]) = next {
             let t_grow = Instant::now();
@@ -176,6 +185,7 @@ pub(crate) fn evolve(
 fn move_and_refit(
     prep: &Prepared,
     cfg: &MembraneConfig,
+    warm: bool,
     surface: &mut ClosedSurface,
     fit: &mut FitSystem,
     b: &mut Buffers,
@@ -189,7 +199,14 @@ fn move_and_refit(
         vn,
     };
     let view = prep.view.as_ref();
-    regularize::shifts(&cfg.regularize, samples, view.is_some(), &mut b.shifts);
+    regularize::shifts(
+        &cfg.regularize,
+        samples,
+        view,
+        warm,
+        &mut b.regularize,
+        &mut b.shifts,
+    );
     b.targets.clear();
     b.targets.extend(
         b.outs

@@ -12,15 +12,14 @@
 //!   neighbours' mean. A pole caught in a thick shell of outliers otherwise
 //!   stays out as a thin horn that no search sees, because its samples'
 //!   normals point across it.
-//!
-//! The occluded-back smoothing of warm-started single views (key
-//! `regularize.warm_back_smoothing`) was removed (issue 19, item 4): switched
-//! off, it changed no figure of `sepmem bench --only ablation-mechanisms`
-//! by more than 0.0008 (`docs/ablation-mechanisms.md`), and the replay that
-//! had justified it is not committed.
+//! - **Occluded-back smoothing** (`warm_back_smoothing`): a warm-started
+//!   single view smooths its occluded back — samples behind the seen
+//!   surface with no data force move by the mean-free umbrella step, so
+//!   dents carried over from earlier frames fade.
 
 use super::config::RegularizeConfig;
 use super::step::{insertion_sort_by, SampleOut, SampleState};
+use super::view;
 
 /// The searched samples of one iteration on their `u_n × v_n` grid
 /// (row-major, periodic in u, clamped in v).
@@ -34,18 +33,34 @@ pub struct Samples<'a> {
     pub vn: usize,
 }
 
+/// Reused buffers of [`shifts`].
+#[derive(Debug, Default)]
+pub struct Scratch {
+    back: Vec<(usize, f64)>,
+}
+
 /// The shifts the refit follows: the median-filtered (or raw) shifts, then
-/// pole tension (whole objects only: the unseen back of a single view,
-/// `single_view`, is held where it is).
-pub fn shifts(cfg: &RegularizeConfig, s: Samples<'_>, single_view: bool, out: &mut Vec<f64>) {
+/// pole tension (whole objects only: the unseen back of a single view is
+/// held where it is), then a warm single view's back smoothing.
+pub fn shifts(
+    cfg: &RegularizeConfig,
+    s: Samples<'_>,
+    view: Option<&view::ViewBuffer>,
+    warm: bool,
+    scratch: &mut Scratch,
+    out: &mut Vec<f64>,
+) {
     if cfg.median_filter {
         median_filter(s, out);
     } else {
         out.clear();
         out.extend(s.outs.iter().map(|o| o.shift));
     }
-    if let (Some(t), false) = (&cfg.pole_tension, single_view) {
+    if let (Some(t), None) = (&cfg.pole_tension, view) {
         pole_tension(s, t.strength, t.rows, out);
+    }
+    if let (Some(vb), Some(k), true) = (view, cfg.warm_back_smoothing, warm) {
+        smooth_occluded_back(s, vb, k, &mut scratch.back, out);
     }
 }
 
@@ -160,6 +175,36 @@ fn umbrella(s: Samples<'_>, i: usize, j: usize) -> f64 {
     (q - outs[k].p).dot(&outs[k].n)
 }
 
+/// Smoothing of a warm-started single view's occluded back: every sample
+/// without a data force that lies behind the seen surface moves `weight`
+/// times its [`umbrella`] step minus the mean step of all such samples, so
+/// dents carried over from earlier frames fade while the back as a whole
+/// neither shrinks nor grows. `sel` is a reused buffer.
+fn smooth_occluded_back(
+    s: Samples<'_>,
+    vb: &view::ViewBuffer,
+    weight: f64,
+    sel: &mut Vec<(usize, f64)>,
+    shifts: &mut [f64],
+) {
+    sel.clear();
+    for j in 0..s.vn {
+        for i in 0..s.un {
+            let o = &s.outs[j * s.un + i];
+            if o.state == SampleState::Still && vb.is_occluded(&o.p) {
+                sel.push((j * s.un + i, umbrella(s, i, j)));
+            }
+        }
+    }
+    if sel.is_empty() {
+        return;
+    }
+    let mean = sel.iter().map(|s| s.1).sum::<f64>() / sel.len() as f64;
+    for &(k, step) in sel.iter() {
+        shifts[k] = weight * (step - mean);
+    }
+}
+
 /// Median of the shifts of moving samples in each 3×3 neighbourhood
 /// (periodic in u, clamped in v); samples that do not move stay put.
 fn median_filter(s: Samples<'_>, shifts: &mut Vec<f64>) {
@@ -209,6 +254,63 @@ mod tests {
 
     fn samples(outs: &[SampleOut], un: usize, vn: usize) -> Samples<'_> {
         Samples { outs, un, vn }
+    }
+
+    #[test]
+    fn occluded_back_smoothing_lifts_a_dent_without_moving_the_back_as_a_whole() {
+        // The camera at the origin sees a sheet at z = 1; the back samples
+        // lie behind it on a curved patch z = 1.2 + 3(x² + y²) (normals +z,
+        // away from the camera: plain smoothing would move the patch as a
+        // whole), one of them dented 0.1 toward the camera.
+        let mut seen = Vec::new();
+        for a in -20..=20 {
+            for b in -20..=20 {
+                seen.push(Vec3::new(a as f64 * 0.01, b as f64 * 0.01, 1.0));
+            }
+        }
+        let vb = view::ViewBuffer::new(&seen, Vec3::zeros(), 0.01).unwrap();
+        let (un, vn) = (8, 6);
+        let mut outs = vec![SampleOut::default(); un * vn];
+        for j in 0..vn {
+            for i in 0..un {
+                let (x, y) = (i as f64 * 0.02 - 0.07, j as f64 * 0.02 - 0.05);
+                let dent = if (i, j) == (3, 2) { 0.1 } else { 0.0 };
+                outs[j * un + i] = SampleOut {
+                    p: Vec3::new(x, y, 1.2 + 3.0 * (x * x + y * y) - dent),
+                    n: Vec3::z(),
+                    ..SampleOut::default()
+                };
+            }
+        }
+        // A sample with a data force keeps its shift.
+        outs[0].state = SampleState::Boundary;
+        outs[0].shift = 0.5;
+        let mut shifts: Vec<f64> = outs.iter().map(|o| o.shift).collect();
+        let mut sel = Vec::new();
+        smooth_occluded_back(samples(&outs, un, vn), &vb, 1.0, &mut sel, &mut shifts);
+        assert_eq!(shifts[0], 0.5);
+        let dent = shifts[2 * un + 3];
+        assert!(dent > 0.08, "the dent moves back out: {dent}");
+        assert!(shifts[2 * un + 2] < 0.0, "its neighbours move in a little");
+        let raw: f64 = (1..un * vn)
+            .map(|k| umbrella(samples(&outs, un, vn), k % un, k / un))
+            .sum();
+        assert!(
+            raw.abs() > 0.005,
+            "plain umbrella steps would move the back: {raw}"
+        );
+        let sum: f64 = shifts[1..].iter().sum();
+        assert!(sum.abs() < 1e-12, "the back as a whole stays: {sum}");
+        // Samples in front of the seen sheet are not smoothed.
+        let mut front = outs.clone();
+        for o in &mut front {
+            o.p.z = 0.5;
+            o.state = SampleState::Still;
+        }
+        front[2 * un + 3].p.z = 0.4;
+        let mut shifts = vec![0.0; un * vn];
+        smooth_occluded_back(samples(&front, un, vn), &vb, 1.0, &mut sel, &mut shifts);
+        assert!(shifts.iter().all(|&s| s == 0.0));
     }
 
     #[test]
