@@ -7,7 +7,11 @@
 //! d_i = (1/k) Σ_{j=1..k} ‖p_i − q_j‖₂                       (paper Eq. 5)
 //! ```
 //!
-//! computed once per cloud with a `kiddo` kd-tree. From the `d_i` two spacing
+//! computed once per cloud with the cloud's [`KnnIndex`] (a k-d tree that a
+//! caller building one anyway, like the membrane's preparation or the
+//! separability filter, passes in with [`Density::from_index`], so that
+//! one index serves the density, the outlier filter and the normals). From
+//! the `d_i` two spacing
 //! estimates δ are derived:
 //!
 //! * the **global** δ of the whole cloud: the median of the `d_i` by default
@@ -21,10 +25,9 @@
 //! [`crate::separability::point`]).
 
 use crate::cloud::Vec3;
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use crate::spatial::KnnIndex;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::num::NonZero;
 use thiserror::Error;
 
 /// Errors while estimating the density of a cloud.
@@ -99,24 +102,29 @@ impl Density {
     /// [`DensityError::ZeroK`] for `k = 0`, [`DensityError::NonFinite`] for a
     /// NaN/infinite point.
     pub fn new(points: &[Vec3], k: usize) -> Result<Self, DensityError> {
-        if k == 0 {
-            return Err(DensityError::ZeroK);
-        }
-        if points.len() < 2 {
-            return Err(DensityError::TooFewPoints { got: points.len() });
-        }
-        if let Some((index, p)) = points
-            .iter()
-            .enumerate()
-            .find(|(_, p)| !p.iter().all(|c| c.is_finite()))
-        {
-            return Err(DensityError::NonFinite {
-                index,
-                point: [p.x, p.y, p.z],
-            });
-        }
+        Self::indexed(points.to_vec(), k).map(|(density, _)| density)
+    }
+
+    /// [`Density::new`], and the [`KnnIndex`] of `points` it built, for the
+    /// caller's other k-NN queries of the same points (normals).
+    ///
+    /// # Errors
+    /// As [`Density::new`].
+    pub fn indexed(points: Vec<Vec3>, k: usize) -> Result<(Self, KnnIndex), DensityError> {
+        check(&points, k)?;
+        let index = KnnIndex::new(points);
+        Ok((Self::from_index(&index, k)?, index))
+    }
+
+    /// [`Density::new`] of the points of `index`, with their index.
+    ///
+    /// # Errors
+    /// As [`Density::new`].
+    pub fn from_index(index: &KnnIndex, k: usize) -> Result<Self, DensityError> {
+        let points = index.points();
+        check(points, k)?;
         let k = k.min(points.len() - 1);
-        let per_point = knn_mean_distances(points, points, k);
+        let per_point = knn_mean_distances(index, points, k);
         let mean = per_point.iter().sum::<f64>() / per_point.len() as f64;
         let median = median_of(&per_point);
         Ok(Self {
@@ -125,14 +133,6 @@ impl Density {
             mean,
             median,
         })
-    }
-
-    /// Compute the density with the parameters of a [`DensityConfig`].
-    ///
-    /// # Errors
-    /// As [`Density::new`].
-    pub fn from_config(points: &[Vec3], cfg: &DensityConfig) -> Result<Self, DensityError> {
-        Self::new(points, cfg.k)
     }
 
     /// The number of neighbours actually used (`k` clamped to `len − 1`).
@@ -176,23 +176,41 @@ impl Density {
     }
 }
 
-/// Paper Eq. 5 for the points `queries`, with neighbours taken from
-/// `points` (`k` nearest, a query point present in `points` excluded as
-/// its own neighbour at distance 0). `points` must be finite and hold more
-/// than `k` points; runs in parallel over the queries (rayon).
-pub(crate) fn knn_mean_distances(points: &[Vec3], queries: &[Vec3], k: usize) -> Vec<f64> {
-    let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coords);
+/// The checks of [`Density::new`]: `k ≥ 1`, two points or more, all finite.
+fn check(points: &[Vec3], k: usize) -> Result<(), DensityError> {
+    if k == 0 {
+        return Err(DensityError::ZeroK);
+    }
+    if points.len() < 2 {
+        return Err(DensityError::TooFewPoints { got: points.len() });
+    }
+    match points
+        .iter()
+        .enumerate()
+        .find(|(_, p)| !p.iter().all(|c| c.is_finite()))
+    {
+        Some((index, p)) => Err(DensityError::NonFinite {
+            index,
+            point: [p.x, p.y, p.z],
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Paper Eq. 5 for the points `queries`, with neighbours taken from the
+/// points of `index` (`k` nearest, a query point present in the index
+/// excluded as its own neighbour at distance 0). The indexed points must be
+/// finite and more than `k`; runs in parallel over the queries (rayon).
+pub(crate) fn knn_mean_distances(index: &KnnIndex, queries: &[Vec3], k: usize) -> Vec<f64> {
     // k + 1 neighbours include the query point itself (or an exact
     // duplicate of it) at distance 0, which contributes nothing.
-    let qty = NonZero::new(k + 1).unwrap_or(NonZero::<usize>::MIN);
     queries
         .par_iter()
         .map(|q| {
-            let sum: f64 = tree
-                .nearest_n::<SquaredEuclidean>(&[q.x, q.y, q.z], qty)
-                .iter()
-                .map(|nn| nn.distance.max(0.0).sqrt())
+            let sum: f64 = index
+                .nearest_n(q, k + 1)
+                .into_iter()
+                .map(|(d2, _)| d2.max(0.0).sqrt())
                 .sum();
             sum / k.max(1) as f64
         })
@@ -291,6 +309,24 @@ mod tests {
             assert_eq!(d.global(DeltaEstimator::Median), d.median());
             assert_eq!(d.global(DeltaEstimator::Mean), d.mean());
         }
+    }
+
+    #[test]
+    fn a_shared_index_gives_the_same_density() {
+        let pts = random_cloud(300, 5);
+        let (d, index) = Density::indexed(pts.clone(), 8).unwrap();
+        assert_eq!(index.points(), &pts[..]);
+        assert_eq!(d, Density::new(&pts, 8).unwrap());
+        assert_eq!(d, Density::from_index(&index, 8).unwrap());
+        let sub: Vec<Vec3> = pts.iter().step_by(10).copied().collect();
+        let d_sub = knn_mean_distances(&index, &sub, 8);
+        for (a, i) in d_sub.iter().zip((0..pts.len()).step_by(10)) {
+            assert_eq!(*a, d.per_point()[i]);
+        }
+        assert!(matches!(
+            Density::indexed(vec![Vec3::zeros(), Vec3::new(f64::NAN, 0.0, 0.0)], 1),
+            Err(DensityError::NonFinite { index: 1, .. })
+        ));
     }
 
     #[test]

@@ -2,16 +2,16 @@
 //!
 //! The normal of a point is the eigenvector of the smallest eigenvalue of the
 //! covariance of its `k` nearest neighbours (itself included), found with the
-//! same `kiddo` kd-tree as the density of paper §III-A. The sign is not
+//! cloud's [`KnnIndex`], the same index that serves its density (paper
+//! §III-A, [`crate::density::Density::from_index`]). The sign is not
 //! oriented: the separability of two regions (paper Eq. 7) is symmetric in
 //! `r1 ↔ r2`, so the separability filter (`--direction normal`) does not need
 //! it. Runs in parallel over points (rayon).
 
 use crate::cloud::Vec3;
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use crate::spatial::KnnIndex;
 use nalgebra::{Matrix3, SymmetricEigen};
 use rayon::prelude::*;
-use std::num::NonZero;
 use thiserror::Error;
 
 /// Errors of the normal estimation.
@@ -44,36 +44,49 @@ pub enum NormalsError {
 /// # Errors
 /// [`NormalsError`] for fewer than 3 points, `k < 3` or a non-finite point.
 pub fn estimate_normals(points: &[Vec3], k: usize) -> Result<Vec<Vec3>, NormalsError> {
+    check(points, k)?;
+    estimate_normals_from(&KnnIndex::new(points.to_vec()), k)
+}
+
+/// [`estimate_normals`] of the points of `index`, with their index.
+///
+/// # Errors
+/// As [`estimate_normals`].
+pub fn estimate_normals_from(index: &KnnIndex, k: usize) -> Result<Vec<Vec3>, NormalsError> {
+    let points = index.points();
+    check(points, k)?;
+    let qty = k.min(points.len());
+    Ok(points
+        .par_iter()
+        .map(|q| {
+            let nn = index.nearest_n(q, qty);
+            let mut mean = Vec3::zeros();
+            for &(_, m) in &nn {
+                mean += points[m];
+            }
+            mean /= nn.len() as f64;
+            let mut cov = Matrix3::<f64>::zeros();
+            for &(_, m) in &nn {
+                let d = points[m] - mean;
+                cov += d * d.transpose();
+            }
+            smallest_eigenvector(cov)
+        })
+        .collect())
+}
+
+/// The checks of [`estimate_normals`]: `k ≥ 3`, three points or more, all finite.
+fn check(points: &[Vec3], k: usize) -> Result<(), NormalsError> {
     if k < 3 {
         return Err(NormalsError::SmallK { k });
     }
     if points.len() < 3 {
         return Err(NormalsError::TooFewPoints { got: points.len() });
     }
-    if let Some(index) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-        return Err(NormalsError::NonFinite { index });
+    match points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        Some(index) => Err(NormalsError::NonFinite { index }),
+        None => Ok(()),
     }
-    let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coords);
-    let qty = NonZero::new(k.min(points.len())).unwrap_or(NonZero::<usize>::MIN);
-    Ok(coords
-        .par_iter()
-        .map(|q| {
-            let nn = tree.nearest_n::<SquaredEuclidean>(q, qty);
-            let n = nn.len() as f64;
-            let mut mean = Vec3::zeros();
-            for m in &nn {
-                mean += points[m.item as usize];
-            }
-            mean /= n;
-            let mut cov = Matrix3::<f64>::zeros();
-            for m in &nn {
-                let d = points[m.item as usize] - mean;
-                cov += d * d.transpose();
-            }
-            smallest_eigenvector(cov)
-        })
-        .collect())
 }
 
 /// Unit eigenvector of the smallest eigenvalue of a symmetric 3×3 matrix
@@ -113,6 +126,25 @@ mod tests {
         for n in estimate_normals(&plane, 8).unwrap() {
             assert!((n.z.abs() - 1.0).abs() < 1e-9, "{n:?}");
         }
+    }
+
+    #[test]
+    fn a_shared_index_gives_the_same_normals() {
+        let pts: Vec<Vec3> = (0..300)
+            .map(|i| {
+                let t = f64::from(i);
+                Vec3::new((t * 0.37).sin(), (t * 0.91).cos(), 0.1 * (t * 0.13).fract())
+            })
+            .collect();
+        let index = KnnIndex::new(pts.clone());
+        assert_eq!(
+            estimate_normals_from(&index, 8).unwrap(),
+            estimate_normals(&pts, 8).unwrap()
+        );
+        assert_eq!(
+            estimate_normals_from(&KnnIndex::new(pts[..2].to_vec()), 8),
+            Err(NormalsError::TooFewPoints { got: 2 })
+        );
     }
 
     #[test]

@@ -1,19 +1,88 @@
-//! Nearest-neighbour queries over a fixed point set: an R*-tree (`rstar`)
-//! behind one small type, shared by the algorithm (the membrane's pole-axis
-//! choice, [`crate::membrane::pole`]) and its evaluation
-//! ([`crate::metrics`], replay scoring), so that neither depends on the
-//! other.
+//! Nearest-neighbour queries over a fixed point set, built once and
+//! queried many times. Two index types, one per kind of query:
 //!
-//! The R*-tree prunes by the exact distance to each node's box, so a query
-//! costs O(log n) wherever it lies. kiddo's k-d tree bounds a far query's
-//! distance by the last split offset per axis only and visited most of the
-//! tree for queries outside it: `eval` of a sphere against the same sphere
-//! offset by 10 took 10 s, one triangle against a sphere 36 s.
+//! - [`KnnIndex`] (a `kiddo` k-d tree): the k nearest neighbours of the
+//!   set's own points or of points close to it. One per frame serves the
+//!   membrane's density (paper Eqs. 5–6: d_i, δ, local δ_R) and its k-NN
+//!   outlier filter ([`crate::membrane`]'s `prepare`), the PCA normals
+//!   ([`crate::normals`]) and, built once per stored surface, the warm
+//!   start's ICP (`pipeline::align`).
+//! - [`PointIndex`] (an R*-tree, `rstar`): the nearest point to queries
+//!   that may lie far from the set, shared by the algorithm (the membrane's
+//!   pole-axis choice, [`crate::membrane::pole`]) and its evaluation
+//!   ([`crate::metrics`], replay scoring), so that neither depends on the
+//!   other. The R*-tree prunes by the exact distance to each node's box, so
+//!   a query costs O(log n) wherever it lies. kiddo's k-d tree bounds a far
+//!   query's distance by the last split offset per axis only and visited
+//!   most of the tree for queries outside it: `eval` of a sphere against
+//!   the same sphere offset by 10 took 10 s, one triangle against a sphere
+//!   36 s.
 
 use crate::cloud::Vec3;
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use rstar::primitives::GeomWithData;
 use rstar::RTree;
+use std::num::NonZero;
+
+/// A k-d tree over a finite point set, for k-nearest-neighbour queries of
+/// points in or near the set (see the module docs).
+#[derive(Debug, Clone)]
+pub struct KnnIndex {
+    tree: ImmutableKdTree<f64, 3>,
+    points: Vec<Vec3>,
+}
+
+impl KnnIndex {
+    /// Index `points` (which should be finite); item `i` is `points[i]`.
+    pub fn new(points: Vec<Vec3>) -> Self {
+        let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+        Self {
+            tree: ImmutableKdTree::new_from_slice(&coords),
+            points,
+        }
+    }
+
+    /// The indexed points, in their item order.
+    pub fn points(&self) -> &[Vec3] {
+        &self.points
+    }
+
+    /// Number of indexed points.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// Whether no point is indexed.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// The `n` (at least 1) indexed points nearest to `q`, nearest first,
+    /// as (squared distance, index); fewer when the set holds fewer. One
+    /// allocation (kiddo's result, reused in place).
+    pub fn nearest_n(&self, q: &Vec3, n: usize) -> Vec<(f64, usize)> {
+        if self.is_empty() {
+            return Vec::new();
+        }
+        let qty = NonZero::new(n).unwrap_or(NonZero::<usize>::MIN);
+        self.tree
+            .nearest_n::<SquaredEuclidean>(&[q.x, q.y, q.z], qty)
+            .into_iter()
+            .map(|nn| (nn.distance, nn.item as usize))
+            .collect()
+    }
+
+    /// Squared distance to, and index of, the indexed point nearest to `q`
+    /// (`(∞, 0)` for an empty index).
+    pub fn nearest_one(&self, q: &Vec3) -> (f64, usize) {
+        if self.is_empty() {
+            return (f64::INFINITY, 0);
+        }
+        let nn = self.tree.nearest_one::<SquaredEuclidean>(&[q.x, q.y, q.z]);
+        (nn.distance, nn.item as usize)
+    }
+}
 
 /// An R*-tree over a point set, built once and queried many times.
 #[derive(Debug)]
@@ -62,14 +131,50 @@ pub fn nearest(reference: &[Vec3], queries: &[Vec3]) -> Vec<(f64, usize)> {
 mod tests {
     use super::*;
 
-    #[test]
-    fn nearest_matches_a_brute_force_scan() {
-        let pts: Vec<Vec3> = (0..500)
+    /// `n` deterministic points spread over [-1, 1]² × [0, 1).
+    fn spread(n: usize) -> Vec<Vec3> {
+        (0..n)
             .map(|k| {
                 let t = k as f64;
                 Vec3::new((t * 0.37).sin(), (t * 0.91).cos(), (t * 0.13).fract())
             })
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn knn_index_matches_a_brute_force_scan() {
+        let pts = spread(400);
+        let index = KnnIndex::new(pts.clone());
+        assert_eq!((index.len(), index.points()), (pts.len(), &pts[..]));
+        for q in pts.iter().step_by(7).chain(&[Vec3::new(0.3, -2.0, 0.5)]) {
+            let mut brute: Vec<(f64, usize)> = pts
+                .iter()
+                .enumerate()
+                .map(|(j, p)| ((p - q).norm_squared(), j))
+                .collect();
+            brute.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let got = index.nearest_n(q, 9);
+            assert_eq!(got.len(), 9);
+            for (g, b) in got.iter().zip(&brute) {
+                assert!((g.0 - b.0).abs() < 1e-12, "{g:?} vs {b:?}");
+                assert!(((pts[g.1] - q).norm_squared() - g.0).abs() < 1e-12);
+            }
+            let (d2, i) = index.nearest_one(q);
+            assert!((d2 - brute[0].0).abs() < 1e-12 && (pts[i] - q).norm_squared() == d2);
+        }
+        // More neighbours than points: all of them; an empty index: none.
+        assert_eq!(
+            KnnIndex::new(pts[..3].to_vec()).nearest_n(&pts[0], 8).len(),
+            3
+        );
+        let empty = KnnIndex::new(Vec::new());
+        assert!(empty.is_empty() && empty.nearest_n(&pts[0], 4).is_empty());
+        assert_eq!(empty.nearest_one(&pts[0]), (f64::INFINITY, 0));
+    }
+
+    #[test]
+    fn nearest_matches_a_brute_force_scan() {
+        let pts = spread(500);
         let queries: Vec<Vec3> = (0..50)
             .map(|k| Vec3::new(k as f64 * 0.03 - 0.7, 0.2, 0.5))
             .collect();

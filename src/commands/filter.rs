@@ -1,13 +1,14 @@
 //! `sepmem filter`: the 3D separability filter (paper §IV-A, Fig. 6). Every
 //! point gets the separability of the two halves of a cuboid centred on it
-//! ([`sepmem::separability::separability_map`]); the cloud is written as a
-//! PLY coloured by that value, with a float `separability` property.
+//! ([`sepmem::separability::separability_map_of`], on the k-NN index built
+//! for the cloud's density); the cloud is written as a PLY coloured by that
+//! value, with a float `separability` property.
 
 use anyhow::{bail, Context, Result};
 use sepmem::cloud::{Attribute, PointCloud};
 use sepmem::config::Config;
 use sepmem::density::Density;
-use sepmem::separability::{separability_map, AttributeSet, FilterDirection, FilterSize};
+use sepmem::separability::{separability_map_of, AttributeSet, FilterDirection, FilterSize};
 use std::path::Path;
 use std::time::Instant;
 
@@ -102,7 +103,8 @@ pub fn run(
     let loaded = sepmem::io::load_cloud(input)
         .with_context(|| format!("reading point cloud {}", input.display()))?;
     let cloud = loaded.cloud;
-    let density = Density::from_config(&cloud.points, &cfg.density)
+    // One k-NN index of the cloud serves its density and its normals.
+    let (density, knn) = Density::indexed(cloud.points.clone(), cfg.density.k)
         .with_context(|| format!("estimating the density of {}", input.display()))?;
     let delta = density.global(cfg.density.estimator);
     let scale = cloud.aabb().longest_edge();
@@ -125,7 +127,7 @@ pub fn run(
         );
     }
     let attributes = (!set.channels().is_empty()).then_some(&set);
-    let map = separability_map(&cloud.points, delta, size, direction, attributes)
+    let map = separability_map_of(&knn, delta, size, direction, attributes)
         .context("computing the separability map")?;
     let mut out = PointCloud::from_points(cloud.points.clone());
     let colours: Vec<[u8; 3]> = map.iter().map(|&v| sepmem::io::colormap(v)).collect();

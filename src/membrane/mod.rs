@@ -24,7 +24,7 @@
 //! several pole axes ([`pole`]); [`extract`] turns the final surface into a
 //! mesh. On top of the paper's recipe this implementation adds the
 //! mechanisms that decided the outcome in the prototype (see
-//! `notes/prototype-findings.md`); each module's doc names the measurement
+//! `../shared/notes/prototype-findings.md`); each module's doc names the measurement
 //! behind its mechanisms.
 //!
 //! [`Membrane`] is the engine: built once from a validated configuration, it

@@ -5,12 +5,20 @@
 //! spatial index of the search; the attribute channels of the weighted
 //! separability (Eq. 9); the occupancy grid of the inward force.
 //!
+//! One k-NN index ([`KnnIndex`]) of the thinned points is built per
+//! reconstruction and serves every k-NN query: the d_i of Eq. 5 (all points,
+//! or the `density_sample` subset), hence δ, the outlier filter by d_i and
+//! the per-point d_i of the local δ_R (Eq. 6, `search_delta = "local"`).
+//! With `density_sample` the outlier filter counts points in voxels instead
+//! (a grid of cell ⅔·outlier_factor·δ, which needs δ first); the cuboid
+//! search has its own grid over the filtered points.
+//!
 //! δ is the median of the per-point mean k-NN distances d_i for a single
 //! view, where the spacing varies with depth and incidence, and
 //! `delta_scale` × their `delta_quantile` for a whole object (1.3 × the
 //! lower quartile by default, which measures the surface's own spacing even
 //! when up to half the points are outliers: the prototype's outlier runs,
-//! `notes/prototype-findings.md`). The keys are those of `membrane.prepare`.
+//! `../shared/notes/prototype-findings.md`). The keys are those of `membrane.prepare`.
 
 use super::config::{Completion, MembraneConfig, PrepareConfig, SearchDelta};
 use super::occupancy::OutsideGrid;
@@ -19,6 +27,7 @@ use crate::cloud::{Aabb, CloudError, PointCloud, Vec3};
 use crate::density::{median_of, Density};
 use crate::separability::attribute::{AttributeSet, AttributeWeights, ChannelWeight};
 use crate::separability::grid::SpatialIndex;
+use crate::spatial::KnnIndex;
 use std::collections::HashSet;
 use std::time::Instant;
 
@@ -123,12 +132,15 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
         .into());
     }
     crate::cloud::check_spread(&finite)?;
+    // The frame's one k-NN index: d_i, δ and the outlier filter.
+    let knn = KnnIndex::new(finite);
+    let finite = knn.points();
     let sample = p
         .density_sample
         .filter(|&n| finite.len() > n && p.search_delta == SearchDelta::Global);
     let (keep, d_kept) = match sample {
-        Some(n) => sampled_density(&finite, p, n)?,
-        None => exact_density(&finite, p)?,
+        Some(n) => sampled_density(&knn, p, n)?,
+        None => exact_density(&knn, p)?,
     };
     let points: Vec<Vec3> = keep.iter().map(|&k| finite[k]).collect();
     let outliers = finite.len() - points.len();
@@ -295,17 +307,18 @@ pub fn thin<T: Copy>(points: Vec<T>, cap: usize) -> Vec<T> {
         .collect()
 }
 
-/// The points kept by the outlier filter (indices into `finite`) and the
-/// d_i (paper Eq. 5) of every kept point: every point's k-NN distance, and
-/// `d_i ≤ outlier_factor · median` keeps it (every point without a factor).
+/// The points kept by the outlier filter (indices into the points of
+/// `knn`) and the d_i (paper Eq. 5) of every kept point: every point's
+/// k-NN distance, and `d_i ≤ outlier_factor · median` keeps it (every
+/// point without a factor).
 fn exact_density(
-    finite: &[Vec3],
+    knn: &KnnIndex,
     cfg: &PrepareConfig,
 ) -> Result<(Vec<usize>, Vec<f64>), MembraneError> {
-    let density = Density::new(finite, cfg.knn_k)?;
+    let density = Density::from_index(knn, cfg.knn_k)?;
     let d_all = density.per_point();
     let limit = cfg.outlier_factor.map(|f| f * density.median());
-    let keep = kept_or_all(finite.len(), limit.is_some(), |k| {
+    let keep = kept_or_all(knn.len(), limit.is_some(), |k| {
         limit.is_some_and(|l| d_all[k] <= l)
     });
     let d_kept = keep.iter().map(|&k| d_all[k]).collect();
@@ -324,24 +337,25 @@ fn kept_or_all(n: usize, filter: bool, keep: impl Fn(usize) -> bool) -> Vec<usiz
     (0..n).collect()
 }
 
-/// `membrane.prepare.density_sample` (`sample`): the k-NN distances of a
-/// spread subset of the points only (δ is their median over the kept
-/// ones), and an outlier filter by voxel counts — a point is kept when
-/// the 3×3×3 voxels of edge ⅔·outlier_factor·δ around it hold more than
-/// `knn_k` points. Returns the kept indices and the d_i of the kept subset
-/// points.
+/// `membrane.prepare.density_sample` (`sample`): the k-NN distances (in
+/// the points of `knn`) of a spread subset of the points only (δ is their
+/// median over the kept ones), and an outlier filter by voxel counts — a
+/// point is kept when the 3×3×3 voxels of edge ⅔·outlier_factor·δ around
+/// it hold more than `knn_k` points. Returns the kept indices and the d_i
+/// of the kept subset points.
 fn sampled_density(
-    finite: &[Vec3],
+    knn: &KnnIndex,
     cfg: &PrepareConfig,
     sample: usize,
 ) -> Result<(Vec<usize>, Vec<f64>), MembraneError> {
+    let finite = knn.points();
     let k = cfg.knn_k.min(finite.len() - 1);
     if k == 0 {
         return Err(crate::density::DensityError::ZeroK.into());
     }
     let subset = thin((0..finite.len()).collect(), sample);
     let queries: Vec<Vec3> = subset.iter().map(|&i| finite[i]).collect();
-    let d_sub = crate::density::knn_mean_distances(finite, &queries, k);
+    let d_sub = crate::density::knn_mean_distances(knn, &queries, k);
     let delta0 = median_of(&d_sub);
     let Some(factor) = cfg.outlier_factor.filter(|_| delta0 > 0.0) else {
         return Ok(((0..finite.len()).collect(), d_sub));

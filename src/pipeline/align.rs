@@ -17,9 +17,12 @@
 //! point-to-point, in closed form (Kabsch/Umeyama, SVD of the 3×3
 //! cross-covariance), which on a coarse vertex set recovers only part of a
 //! rotation (about two thirds of 0.06 rad per frame on the synth ellipsoid).
+//!
+//! The model comes as a [`KnnIndex`] of its vertices: the tracker builds it
+//! once, when it stores the surface, not on every alignment.
 
 use crate::cloud::Vec3;
-use kiddo::{KdTree, SquaredEuclidean};
+use crate::spatial::KnnIndex;
 use nalgebra::{Matrix3, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector6};
 
 /// A rigid motion `p ↦ R p + t`.
@@ -38,15 +41,16 @@ pub struct Alignment {
     pub steps: usize,
 }
 
-/// Align `model` (previous surface vertices, with their unit normals for
-/// point-to-plane steps) onto `data` (new points).
+/// Align the model (the previous surface's vertices, given as their
+/// `index`, with their unit normals for point-to-plane steps) onto `data`
+/// (new points).
 ///
 /// `initial` is applied to the model first (usually the centroid shift);
 /// `trim` is the largest match distance kept; `max_points` caps the number of
 /// data points used per step (evenly strided). `normals`, when given, must
-/// be as long as `model` (otherwise point-to-point steps are used).
+/// be as many as the vertices (otherwise point-to-point steps are used).
 pub fn align(
-    model: &[Vec3],
+    index: &KnnIndex,
     normals: Option<&[Vec3]>,
     data: &[Vec3],
     initial: Rigid,
@@ -61,12 +65,9 @@ pub fn align(
         inlier_fraction: 0.0,
         steps: 0,
     };
+    let model = index.points();
     if model.len() < 3 || data.len() < 3 {
         return out;
-    }
-    let mut tree: KdTree<f64, 3> = KdTree::with_capacity(model.len());
-    for (i, p) in model.iter().enumerate() {
-        tree.add(&[p.x, p.y, p.z], i as u64);
     }
     let normals = normals.filter(|n| n.len() == model.len());
     let stride = (data.len() / max_points.max(1)).max(1);
@@ -81,11 +82,11 @@ pub fn align(
         for q in data.iter().step_by(stride) {
             sampled += 1;
             let ql = inv.transform_point(&(*q).into()).coords;
-            let nn = tree.nearest_one::<SquaredEuclidean>(&[ql.x, ql.y, ql.z]);
-            if nn.distance <= trim2 {
-                sum2 += nn.distance;
+            let (d2, vertex) = index.nearest_one(&ql);
+            if d2 <= trim2 {
+                sum2 += d2;
                 matches.push(Match {
-                    vertex: nn.item as usize,
+                    vertex,
                     local: ql,
                     data: *q,
                 });
@@ -235,7 +236,15 @@ mod tests {
         let model = sphere_points(4000, 1);
         let truth = Rigid::new(Vec3::new(0.05, -0.03, 0.02), Vec3::new(0.0, 0.0, 0.12));
         let data = partial_view(3000, 2, &truth);
-        let a = align(&model, None, &data, Rigid::identity(), 30, 0.2, 2000);
+        let a = align(
+            &KnnIndex::new(model.clone()),
+            None,
+            &data,
+            Rigid::identity(),
+            30,
+            0.2,
+            2000,
+        );
         // Point-to-point ICP onto a discrete vertex set (spacing ~0.045 here)
         // leaves a residual of the order of the spacing; it must still remove
         // most of the motion.
@@ -272,8 +281,9 @@ mod tests {
         let data = partial_view(6000, 4, &truth);
         let angle_error = |m: &Rigid| (m.rotation.inverse() * truth.rotation).angle();
         let init = Rigid::identity();
-        let plane = align(&model, Some(&normals), &data, init, 5, 0.2, 300);
-        let point = align(&model, None, &data, init, 5, 0.2, 300);
+        let index = KnnIndex::new(model);
+        let plane = align(&index, Some(&normals), &data, init, 5, 0.2, 300);
+        let point = align(&index, None, &data, init, 5, 0.2, 300);
         let (e_plane, e_point) = (angle_error(&plane.motion), angle_error(&point.motion));
         assert!(
             e_plane < 0.015 && e_plane < 0.5 * e_point,
@@ -283,14 +293,22 @@ mod tests {
         let t_err = (plane.motion.translation.vector - truth.translation.vector).norm();
         assert!(t_err < 0.01, "translation error {t_err}");
         // Normals of the wrong length fall back to point-to-point.
-        let fallback = align(&model, Some(&normals[1..]), &data, init, 5, 0.2, 300);
+        let fallback = align(&index, Some(&normals[1..]), &data, init, 5, 0.2, 300);
         assert_eq!(fallback.motion, point.motion);
     }
 
     #[test]
     fn degenerate_inputs_return_the_initial_motion() {
         let init = Rigid::translation(1.0, 0.0, 0.0);
-        let a = align(&[], None, &[Vec3::zeros()], init, 5, 1.0, 10);
+        let a = align(
+            &KnnIndex::new(Vec::new()),
+            None,
+            &[Vec3::zeros()],
+            init,
+            5,
+            1.0,
+            10,
+        );
         assert_eq!(a.motion, init);
         assert_eq!(a.steps, 0);
     }

@@ -36,6 +36,7 @@ use crate::membrane::{
     WarmStart,
 };
 use crate::mesh::TriMesh;
+use crate::spatial::KnnIndex;
 use crate::spline::ClosedSurface;
 use serde::{Deserialize, Serialize};
 use std::borrow::Cow;
@@ -270,8 +271,10 @@ pub struct StreamStats {
 #[derive(Debug, Clone)]
 struct Previous {
     surface: ClosedSurface,
-    vertices: Vec<Vec3>,
-    /// Unit vertex normals of `vertices` (point-to-plane alignment).
+    /// The index of the vertices the next frame aligns onto
+    /// ([`alignment_model`]), built once here rather than per alignment.
+    model: KnnIndex,
+    /// Unit normals of the `model` vertices (point-to-plane alignment).
     normals: Vec<Vec3>,
     centroid: Vec3,
     size: f64,
@@ -552,7 +555,7 @@ impl Tracker {
         let (vertices, normals) = alignment_model(&rec.mesh);
         self.previous = Some(Previous {
             surface: rec.surface.clone(),
-            vertices,
+            model: KnnIndex::new(vertices),
             normals,
             centroid,
             size,
@@ -640,7 +643,7 @@ impl Tracker {
         );
         let motion = if cfg.icp_steps > 0 {
             align::align(
-                &prev.vertices,
+                &prev.model,
                 Some(&prev.normals),
                 &cloud.points,
                 shift,

@@ -7,16 +7,18 @@
 //! when attribute weights are given. This is the oriented search primitive
 //! with `K = 1`. With several directions the map keeps the maximum; with
 //! [`FilterDirection::Normal`] each point uses its own PCA normal
-//! ([`crate::normals`]). The map is high where density or attributes change:
-//! region boundaries.
+//! ([`crate::normals`]; [`separability_map_of`] takes them from the k-NN
+//! index the caller built for the cloud's density). The map is high where
+//! density or attributes change: region boundaries.
 //!
 //! Evaluated in parallel over points (rayon, one scratch per worker).
 
 use crate::cloud::Vec3;
-use crate::normals::estimate_normals;
+use crate::normals::{estimate_normals, estimate_normals_from};
 use crate::separability::attribute::AttributeSet;
 use crate::separability::grid::SpatialIndex;
 use crate::separability::search::{Cuboid, Delta, SearchError, SearchScratch, Searcher};
+use crate::spatial::KnnIndex;
 use rayon::prelude::*;
 use thiserror::Error;
 
@@ -94,6 +96,36 @@ pub fn separability_map(
     direction: FilterDirection,
     attributes: Option<&AttributeSet>,
 ) -> Result<Vec<f32>, FilterError> {
+    let normals = |k| finite_normals(points, k);
+    map_with(points, normals, delta, size, direction, attributes)
+}
+
+/// [`separability_map`] of the points of `knn` (which must be finite), whose
+/// index also serves the [`FilterDirection::Normal`] normals.
+///
+/// # Errors
+/// As [`separability_map`].
+pub fn separability_map_of(
+    knn: &KnnIndex,
+    delta: f64,
+    size: FilterSize,
+    direction: FilterDirection,
+    attributes: Option<&AttributeSet>,
+) -> Result<Vec<f32>, FilterError> {
+    let normals = |k| Ok(estimate_normals_from(knn, k)?);
+    map_with(knn.points(), normals, delta, size, direction, attributes)
+}
+
+/// The map of [`separability_map`]; `normals(k)` gives every point's
+/// normal when the direction is [`FilterDirection::Normal`].
+fn map_with(
+    points: &[Vec3],
+    normals: impl FnOnce(usize) -> Result<Vec<Vec3>, FilterError>,
+    delta: f64,
+    size: FilterSize,
+    direction: FilterDirection,
+    attributes: Option<&AttributeSet>,
+) -> Result<Vec<f32>, FilterError> {
     let index = SpatialIndex::with_cell_size(points, size.width.max(size.depth) * 0.5)
         .or_else(|_| SpatialIndex::new(points))
         .map_err(|_| SearchError::BadExtent {
@@ -115,7 +147,7 @@ pub fn separability_map(
     .oriented_box()?;
     let axes = direction.axes();
     let normals = match direction {
-        FilterDirection::Normal { k } => Some(finite_normals(points, k)?),
+        FilterDirection::Normal { k } => Some(normals(k)?),
         _ => None,
     };
     Ok(points
@@ -298,6 +330,11 @@ mod tests {
         )
         .unwrap();
         assert_eq!(n.last().copied(), Some(0.0));
+        // The caller's k-NN index gives the same map.
+        let knn = KnnIndex::new(tilted.clone());
+        let of = separability_map_of(&knn, 0.012, size, FilterDirection::Normal { k: 8 }, None);
+        let plain = separability_map(&tilted, 0.012, size, FilterDirection::Normal { k: 8 }, None);
+        assert_eq!(of.unwrap(), plain.unwrap());
         assert!(separability_map(
             &tilted[..2],
             0.012,

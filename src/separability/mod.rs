@@ -18,7 +18,7 @@ pub mod search;
 pub use attribute::{
     AttributeChannel, AttributeError, AttributeSet, AttributeWeights, ChannelWeight,
 };
-pub use filter::{separability_map, FilterDirection, FilterError, FilterSize};
+pub use filter::{separability_map, separability_map_of, FilterDirection, FilterError, FilterSize};
 pub use grid::{GridError, OrientedBox, SpatialIndex};
 pub use point::{
     capacities, capacity, eta_from_counts, eta_phi2, eta_phi2_ratio, non_data_count,
