@@ -216,7 +216,9 @@ def expected_endpoints(args, streams):
         want[("MS", o.topic)] = ("sensor_msgs/msg/PointCloud2", "volatile", 5)
         for s, t in Outputs.TYPES.items():
             dur = "volatile" if s == "membrane_diagnostics" else "transient_local"
-            want[("MP", f"{o.topic}/{s}")] = (t, dur, 10)
+            # A MarkerArray holds every object of its frame: the node keeps
+            # only the last one for late joiners (KEEP_LAST 1).
+            want[("MP", f"{o.topic}/{s}")] = (t, dur, 1 if s == "mesh_markers" else 10)
     return want
 
 
