@@ -39,10 +39,15 @@
 //! points, [`kept_relative`]), and the
 //! occupancy grid counts each point for the area it samples, `(δ_i/δ)²`.
 //!
-//! Measured (`sepmem bench --only table1`, seed 20250307, 18 shapes, 20,000
-//! points; see `launch/sepmem.json5` for the figures): the non-uniform
-//! condition (density falling 8:1 along the object) and the paper's four
-//! conditions with and without it.
+//! Measured (`sepmem bench --only table1 --datasets ../shared/datasets`,
+//! seed 20250307, 18 shapes, 20,000 points, niced on two shared cores):
+//! the non-uniform condition (density falling 8:1 along the longest axis)
+//! F 0.636 → 0.930 for genus 0 (uniform original: 0.948) and 0.531 → 0.806
+//! for genus > 0 (uniform: 0.860); the paper's four conditions move by
+//! −0.0024…+0.0028 (genus 0; overall −0.0001) and −0.0066…+0.0034
+//! (genus > 0, surface outliers −0.0066; overall +0.0004). The paper's
+//! local δ_R alone (`search_delta = "local"`) gave 0.691 / 0.602 on the
+//! non-uniform condition: the filter's hole and the occupancy leak remain.
 
 use super::config::LocalSpacingConfig;
 use crate::cloud::Vec3;
