@@ -277,21 +277,21 @@ fn non_uniform_f(name: &str, seed: u64) -> (f64, f64) {
     (run(&serial()), run(&global))
 }
 
-/// The local spacing of the search (`membrane.prepare.local_spacing`)
-/// keeps a thinly sampled end of an object from reading as empty space.
-/// Measured: F ELLIPSOID_ON (ellipsoid) and BOTTLE_ON (bottle) with it,
-/// ELLIPSOID_OFF and BOTTLE_OFF with the global δ.
+/// The local spacing (`membrane.prepare.local_spacing`) keeps a thinly
+/// sampled end of an object from reading as empty space. Measured (seed
+/// 21): F 1.000 (ellipsoid) and 1.000 (bottle) with it, 0.702 and 0.609
+/// with the global δ, filter and occupancy counts.
 #[test]
 fn non_uniform_density_is_followed_by_the_local_spacing() {
-    for (name, bound) in [("ellipsoid", 0.9), ("bottle", 0.9)] {
+    for name in ["ellipsoid", "bottle"] {
         let (on, off) = non_uniform_f(name, 21);
         eprintln!("non-uniform {name}: F {on:.4} with the local spacing, {off:.4} without");
         assert!(
-            on >= bound,
+            on >= 0.97,
             "non-uniform {name}: F {on} (without local spacing {off})"
         );
         assert!(
-            on >= off + 0.02,
+            on >= off + 0.1,
             "local spacing: non-uniform {name} F {off} -> {on}"
         );
     }
