@@ -1,5 +1,6 @@
-//! Input clouds of the benchmark: the paper's Table 1 conditions, the
-//! sphere robustness sweep and the coloured clouds of the attribute ablation.
+//! Input clouds of the benchmark: the paper's Table 1 conditions (and a
+//! non-uniform one of ours), the sphere robustness sweep and the coloured
+//! clouds of the attribute ablation.
 //!
 //! Every generator is deterministic: it takes an explicit RNG, which the
 //! benchmark seeds from a fixed base seed and the experiment's name
@@ -20,6 +21,13 @@ pub const REGION_OUTLIER_FRACTION: f64 = 0.2;
 pub const REGION_OUTLIER_MARGIN: f64 = 0.05;
 /// Standard deviation of the perturbed duplicates of the "surface outliers" condition.
 pub const SURFACE_OUTLIER_SIGMA: f64 = 0.025;
+/// Ratio of the densest to the sparsest end of the "non-uniform" condition
+/// (issue 20: the membrane must keep its accuracy at 8:1).
+pub const NON_UNIFORM_RATIO: f64 = 8.0;
+/// Uniform candidates drawn per point of the "non-uniform" condition: the
+/// density falloff keeps a candidate with probability at least
+/// `1/NON_UNIFORM_RATIO`, so this many always suffice in expectation.
+pub const NON_UNIFORM_CANDIDATES: usize = 8;
 
 /// A deterministic RNG for the experiment called `name` under base seed `seed`.
 pub fn rng_for(seed: u64, name: &str) -> ChaCha8Rng {
@@ -31,7 +39,7 @@ pub fn seed_for(seed: u64, name: &str) -> u64 {
     seed ^ xxhash_rust::xxh3::xxh3_64(name.as_bytes()).rotate_left(17)
 }
 
-/// The four input conditions of the paper's Table 1.
+/// The input conditions of Table 1: the paper's four and the non-uniform one.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Condition {
@@ -43,16 +51,40 @@ pub enum Condition {
     RegionOutliers,
     /// Every point duplicated, the duplicates perturbed with σ = 0.025.
     SurfaceOutliers,
+    /// Not in the paper: a density that falls smoothly by a factor
+    /// [`NON_UNIFORM_RATIO`] along the object's longest bounding-box axis
+    /// ([`density_falloff`]), as where a sensor sees one end of an object
+    /// closer or more often than the other.
+    NonUniform,
 }
 
 impl Condition {
     /// All conditions, in table order.
-    pub const ALL: [Condition; 4] = [
+    pub const ALL: [Condition; 5] = [
+        Condition::Original,
+        Condition::Noise,
+        Condition::RegionOutliers,
+        Condition::SurfaceOutliers,
+        Condition::NonUniform,
+    ];
+
+    /// The paper's four conditions, whose mean is Table 1's "overall".
+    pub const PAPER: [Condition; 4] = [
         Condition::Original,
         Condition::Noise,
         Condition::RegionOutliers,
         Condition::SurfaceOutliers,
     ];
+
+    /// Area-uniform surface samples [`Self::apply`] takes per point of the
+    /// cloud it makes (1, or [`NON_UNIFORM_CANDIDATES`] for the non-uniform
+    /// condition, which keeps only some of them).
+    pub fn candidates_per_point(self) -> usize {
+        match self {
+            Condition::NonUniform => NON_UNIFORM_CANDIDATES,
+            _ => 1,
+        }
+    }
 
     /// Name used in tables and JSON.
     pub fn name(self) -> &'static str {
@@ -61,10 +93,13 @@ impl Condition {
             Condition::Noise => "noise",
             Condition::RegionOutliers => "region_outliers",
             Condition::SurfaceOutliers => "surface_outliers",
+            Condition::NonUniform => "non_uniform",
         }
     }
 
-    /// The input cloud of this condition built from the clean surface samples.
+    /// The input cloud of this condition built from the clean surface
+    /// samples (for the non-uniform condition: [`Self::candidates_per_point`]
+    /// times as many as the cloud is to hold).
     pub fn apply(self, surface: &[Vec3], rng: &mut impl Rng) -> Vec<Vec3> {
         match self {
             Condition::Original => surface.to_vec(),
@@ -83,8 +118,41 @@ impl Condition {
             Condition::SurfaceOutliers => {
                 with_perturbed_duplicates(surface, SURFACE_OUTLIER_SIGMA, rng)
             }
+            Condition::NonUniform => density_falloff(
+                surface,
+                surface.len() / NON_UNIFORM_CANDIDATES,
+                NON_UNIFORM_RATIO,
+                rng,
+            ),
         }
     }
+}
+
+/// At most `n` of the area-uniform `candidates`, thinned so that the
+/// density falls exponentially by the factor `ratio` along the longest
+/// bounding-box axis `a` of the candidates: a candidate `p` is kept with
+/// probability `ratio^(−s)`, `s = (p_a − min_a)/(max_a − min_a) ∈ [0, 1]`
+/// (rejection sampling, so the kept points are independent draws from the
+/// density `∝ ratio^(−s)` on the surface: `ratio` times denser at the
+/// `min_a` end than at the `max_a` end, the log-density linear along `a`).
+/// The first `n` kept candidates are returned (fewer when fewer are kept;
+/// about `n·ratio·E[ratio^(−s)] ≥ n` are for `n·ratio` candidates).
+pub fn density_falloff(candidates: &[Vec3], n: usize, ratio: f64, rng: &mut impl Rng) -> Vec<Vec3> {
+    let bb = Aabb::from_points(candidates);
+    let e = bb.extent();
+    let axis = (0..3).fold(0, |a, i| if e[i] > e[a] { i } else { a });
+    let (lo, len) = (bb.min[axis], e[axis]);
+    let mut out = Vec::with_capacity(n);
+    for p in candidates {
+        if out.len() >= n {
+            break;
+        }
+        let s = if len > 0.0 { (p[axis] - lo) / len } else { 0.0 };
+        if rng.random::<f64>() < ratio.powf(-s.clamp(0.0, 1.0)) {
+            out.push(*p);
+        }
+    }
+    out
 }
 
 /// A vector of three independent N(0, σ²) components (zero for σ ≤ 0).
@@ -189,6 +257,32 @@ mod tests {
         let dup = Condition::SurfaceOutliers.apply(&s, &mut rng);
         assert_eq!(dup.len(), 2000);
         assert_eq!(&dup[..1000], &s[..]);
+    }
+
+    #[test]
+    fn non_uniform_density_falls_by_the_ratio_along_the_longest_axis() {
+        // Uniform candidates in a 1 × 0.2 × 0.1 box: the kept density along x
+        // is ∝ 8^(−x), so the first and last tenth hold counts in the
+        // ratio ∫₀^0.1 8^(−s) ds / ∫_0.9^1 8^(−s) ds = 8^0.9.
+        let mut rng = rng_for(5, "nu");
+        let candidates: Vec<Vec3> = (0..200_000)
+            .map(|_| {
+                Vec3::new(
+                    rng.random_range(0.0..1.0),
+                    rng.random_range(0.0..0.2),
+                    rng.random_range(0.0..0.1),
+                )
+            })
+            .collect();
+        let kept = Condition::NonUniform.apply(&candidates, &mut rng);
+        assert_eq!(kept.len(), 200_000 / NON_UNIFORM_CANDIDATES);
+        let count = |lo: f64, hi: f64| kept.iter().filter(|p| p.x >= lo && p.x < hi).count();
+        let ratio = count(0.0, 0.1) as f64 / count(0.9, 1.0) as f64;
+        let want = NON_UNIFORM_RATIO.powf(0.9);
+        assert!((ratio / want - 1.0).abs() < 0.1, "{ratio} vs {want}");
+        // Too few candidates: every kept one, fewer than asked.
+        let few = density_falloff(&candidates[..80], 80, NON_UNIFORM_RATIO, &mut rng);
+        assert!(few.len() < 80 && !few.is_empty(), "{}", few.len());
     }
 
     #[test]

@@ -71,7 +71,7 @@ fn signed(v: f64) -> String {
 fn mechanisms_table(out: &mut String, m: &Mechanisms) {
     let _ = writeln!(
         out,
-        "\n## Mechanism ablation: ΔF = F(switched) − F(baseline)\n\nTable 1: {} shapes ({}), {} points, four conditions; sweep: six σ; replays: {} synth sequences of {} frames ({}). `≤ {}`: no |ΔF| above {} (removal candidate).\n",
+        "\n## Mechanism ablation: ΔF = F(switched) − F(baseline)\n\nTable 1: {} shapes ({}), {} points, the paper's four conditions (genus 0, genus > 0) and the non-uniform one; sweep: six σ; replays: {} synth sequences of {} frames ({}). `≤ {}`: no |ΔF| above {} (removal candidate).\n",
         m.table1_shapes.len(),
         m.table1_shapes.join(", "),
         m.table1_points,
@@ -83,10 +83,10 @@ fn mechanisms_table(out: &mut String, m: &Mechanisms) {
     );
     let _ = writeln!(
         out,
-        "| switch | ΔF Table 1 genus 0 | ΔF Table 1 genus > 0 | ΔF sweep | ΔF replays | failed | ≤ {} |",
+        "| switch | ΔF Table 1 genus 0 | ΔF Table 1 genus > 0 | ΔF Table 1 non-uniform | ΔF sweep | ΔF replays | failed | ≤ {} |",
         m.threshold
     );
-    let _ = writeln!(out, "|---|---|---|---|---|---|---|");
+    let _ = writeln!(out, "|---|---|---|---|---|---|---|---|");
     for r in &m.rows {
         let cells: Vec<String> = if r.switch == "baseline" {
             r.figures

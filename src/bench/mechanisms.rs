@@ -7,9 +7,10 @@
 //! default is switched *on*) are measured on four figures:
 //!
 //! - the overall mean F of Table 1's genus-0 and genus > 0 shapes (the
-//!   [`super::table1`] code path: the same shapes, the four conditions, the
-//!   same clouds and seeds as the `table1` section, so the baseline row is
-//!   the `table1` section's figure);
+//!   [`super::table1`] code path: the same shapes, the paper's four
+//!   conditions, the same clouds and seeds as the `table1` section, so the
+//!   baseline row is the `table1` section's figure), and the mean F of its
+//!   non-uniform condition over every shape;
 //! - the mean F of the sphere sweep ([`super::sweep`], its six σ);
 //! - the mean F of nine synth replays ([`replay_specs`]: ellipsoid, bottle
 //!   and mug turning in place and orbited by the camera, and the three pairs
@@ -23,8 +24,8 @@
 //! Each row gives ΔF = F(switched) − F(baseline) per figure. A mechanism
 //! whose switch moves no figure by more than [`THRESHOLD`] is a candidate for
 //! removal (unless a committed measurement on another input shows it is
-//! needed). With the shared datasets the full run is 17 configurations ×
-//! (Table 1: 18 shapes × 4 conditions at 20,000 points; 6 sweep runs; 54
+//! needed). With the shared datasets the full run is 18 configurations ×
+//! (Table 1: 18 shapes × 5 conditions at 20,000 points; 6 sweep runs; 54
 //! replay frames), about 30 min niced on two shared cores. `--quick` uses
 //! the quick Table 1 (sphere and torus, 5,000 points), the sweep and one
 //! replay (ellipsoid turning, 2 frames).
@@ -32,6 +33,7 @@
 //! Not in the default run (it repeats Table 1 seventeen times): only when
 //! named in `--only`.
 
+use super::clouds::Condition;
 use super::{sweep, table1, BenchError, BenchOptions, Skip, SweepRow, Table1};
 use crate::config::Config;
 use crate::eval::replay_scored;
@@ -50,10 +52,12 @@ pub const THRESHOLD: f64 = 0.003;
 /// The optional mechanisms and the `--set` override that switches each.
 /// Pure cost bounds (`prepare.max_points`, `schedule.time_limit_ms`,
 /// iteration caps) are not mechanisms and are not switched.
-pub const MECHANISMS: [&str; 16] = [
+pub const MECHANISMS: [&str; 17] = [
     "membrane.prepare.outlier_factor=null",
     // Off by default (global δ): switched on.
     "membrane.prepare.search_delta=local",
+    // Off by default (issue 20, not yet measured on single views): switched on.
+    "membrane.prepare.local_spacing={neighbours: 32, tolerance: 1.0}",
     // membrane.prepare.density_sample is null by default; the pipeline's warm
     // frames use it (pipeline.warm_density_sample 256): 0 switches it off there.
     "pipeline.warm_density_sample=0",
@@ -73,13 +77,15 @@ pub const MECHANISMS: [&str; 16] = [
     "membrane.view.completion=mirror",
 ];
 
-/// The four figures of one configuration (mean F-scores).
+/// The five figures of one configuration (mean F-scores).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Figures {
     /// Table 1, genus-0 shapes, overall mean F.
     pub table1_genus0: f64,
     /// Table 1, genus > 0 shapes, overall mean F.
     pub table1_genus_pos: f64,
+    /// Table 1, the non-uniform condition, mean F over every shape.
+    pub table1_non_uniform: f64,
     /// Mean F of the sphere sweep.
     pub sweep: f64,
     /// Mean over the synth replays of their mean frame F.
@@ -88,10 +94,11 @@ pub struct Figures {
 
 impl Figures {
     /// The figures as an array, in table order.
-    pub fn values(&self) -> [f64; 4] {
+    pub fn values(&self) -> [f64; 5] {
         [
             self.table1_genus0,
             self.table1_genus_pos,
+            self.table1_non_uniform,
             self.sweep,
             self.replays,
         ]
@@ -101,6 +108,7 @@ impl Figures {
         Figures {
             table1_genus0: self.table1_genus0 - base.table1_genus0,
             table1_genus_pos: self.table1_genus_pos - base.table1_genus_pos,
+            table1_non_uniform: self.table1_non_uniform - base.table1_non_uniform,
             sweep: self.sweep - base.sweep,
             replays: self.replays - base.replays,
         }
@@ -120,7 +128,7 @@ impl Figures {
 pub struct MechanismRow {
     /// The `--set` override (`baseline` for the baseline row).
     pub switch: String,
-    /// Its four figures.
+    /// Its five figures.
     pub figures: Figures,
     /// ΔF = F(switched) − F(baseline) per figure.
     pub delta: Figures,
@@ -263,12 +271,20 @@ fn replay_figure(bags: &ReplayBags, cfg: &Config) -> Result<(f64, usize), BenchE
     Ok((m, failed + bad))
 }
 
-/// The overall mean F of Table 1's genus-0 and genus > 0 shapes.
-fn table1_figures(t: &Table1) -> (f64, f64, usize) {
+/// The overall mean F of Table 1's genus-0 and genus > 0 shapes, the
+/// failed runs among them, and the mean F of the non-uniform rows (every
+/// genus; failed ones excluded).
+fn table1_figures(t: &Table1) -> (f64, f64, usize, f64) {
     let overall = |s: &[super::Summary]| s.last().map_or((f64::NAN, 0), |o| (o.fscore, o.failed));
     let (g0, f0) = overall(&t.genus0);
     let (gp, fp) = overall(&t.genus_pos);
-    (g0, gp, f0 + fp)
+    let (nu, _) = mean_finite(
+        t.rows
+            .iter()
+            .filter(|r| r.condition == Condition::NonUniform)
+            .map(|r| r.run.scores.map_or(f64::NAN, |s| s.fscore)),
+    );
+    (g0, gp, f0 + fp, nu)
 }
 
 /// What one configuration measured.
@@ -293,7 +309,7 @@ fn figures(
         ..opts.clone()
     };
     let t = table1(&variant, skipped, log)?;
-    let (table1_genus0, table1_genus_pos, t_failed) = table1_figures(&t);
+    let (table1_genus0, table1_genus_pos, t_failed, table1_non_uniform) = table1_figures(&t);
     let rows: Vec<SweepRow> = sweep(&variant, log)?;
     let (sweep_f, s_failed) = mean_finite(
         rows.iter()
@@ -306,6 +322,7 @@ fn figures(
         figures: Figures {
             table1_genus0,
             table1_genus_pos,
+            table1_non_uniform,
             sweep: sweep_f,
             replays,
         },
@@ -366,9 +383,9 @@ pub fn ablate(
         }
         let delta = f.minus(&base_f);
         log(&format!(
-            "ablation-mechanisms {switch}: F {:.4} {:.4} {:.4} {:.4}, ΔF {:+.4} {:+.4} {:+.4} {:+.4}",
-            f.table1_genus0, f.table1_genus_pos, f.sweep, f.replays,
-            delta.table1_genus0, delta.table1_genus_pos, delta.sweep, delta.replays
+            "ablation-mechanisms {switch}: F {:.4} {:.4} {:.4} {:.4} {:.4}, ΔF {:+.4} {:+.4} {:+.4} {:+.4} {:+.4}",
+            f.table1_genus0, f.table1_genus_pos, f.table1_non_uniform, f.sweep, f.replays,
+            delta.table1_genus0, delta.table1_genus_pos, delta.table1_non_uniform, delta.sweep, delta.replays
         ));
         rows.push(MechanismRow {
             switch: switch.to_string(),
@@ -432,12 +449,13 @@ mod tests {
         assert_eq!(got.rows.len(), 2);
         let (base, off) = (&got.rows[0], &got.rows[1]);
         assert_eq!(base.switch, "baseline");
-        assert_eq!(base.delta.values(), [0.0; 4]);
+        assert_eq!(base.delta.values(), [0.0; 5]);
         let plain = table1(&opts, &mut Vec::new(), &mut |_| {}).unwrap();
-        let (g0, gp, failed) = table1_figures(&plain);
+        let (g0, gp, failed, nu) = table1_figures(&plain);
         assert_eq!(failed, 0);
         assert_eq!(base.figures.table1_genus0, g0);
         assert_eq!(base.figures.table1_genus_pos, gp);
+        assert_eq!(base.figures.table1_non_uniform, nu);
         assert_eq!(got.table1_shapes, ["sphere", "torus"]);
         assert!(
             base.figures.values().iter().all(|v| v.is_finite()),

@@ -105,6 +105,34 @@ pub struct PrepareConfig {
     pub delta_quantile: f64,
     /// Global δ of a whole object: that quantile times this factor.
     pub delta_scale: f64,
+    /// With the global δ: the search's δ_R from the spacing of the points
+    /// near each cuboid, never below δ, an outlier filter relative to the
+    /// kept neighbours and area-weighted occupancy counts
+    /// ([`super::spacing`]); `None`: the global δ everywhere.
+    pub local_spacing: Option<LocalSpacingConfig>,
+}
+
+/// `membrane.prepare.local_spacing`: the density-robust spacing of the
+/// search ([`super::spacing`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LocalSpacingConfig {
+    /// Neighbours (the point itself included) over whose d_i a point's
+    /// local spacing is taken (their median).
+    pub neighbours: usize,
+    /// A point's spacing grows only where its neighbourhood is sparser than
+    /// the cloud's median by more than this factor (≥ 1), and by the
+    /// excess: `δ_i = δ · max(1, m_i / (tolerance · m))`.
+    pub tolerance: f64,
+}
+
+impl Default for LocalSpacingConfig {
+    fn default() -> Self {
+        Self {
+            neighbours: 32,
+            tolerance: 1.0,
+        }
+    }
 }
 
 impl Default for PrepareConfig {
@@ -117,6 +145,7 @@ impl Default for PrepareConfig {
             search_delta: SearchDelta::Global,
             delta_quantile: 0.25,
             delta_scale: 1.3,
+            local_spacing: None,
         }
     }
 }
@@ -511,6 +540,18 @@ fn validate_prepare(p: &PrepareConfig) -> Result<(), ConfigError> {
         pos(p.delta_scale),
         "prepare.delta_scale",
         "must be positive",
+    )?;
+    check(
+        p.local_spacing.as_ref().is_none_or(|l| l.neighbours >= 1),
+        "prepare.local_spacing.neighbours",
+        "must be at least 1 (null turns the local spacing off)",
+    )?;
+    check(
+        p.local_spacing
+            .as_ref()
+            .is_none_or(|l| l.tolerance >= 1.0 && l.tolerance.is_finite()),
+        "prepare.local_spacing.tolerance",
+        "must be a finite factor of at least 1",
     )
 }
 

@@ -37,9 +37,11 @@ const STRETCH_RINGS: usize = 16;
 
 /// The per-sample search over prepared points.
 fn stepper<'a>(prep: &'a Prepared, cfg: &'a MembraneConfig) -> Result<Stepper<'a>, MembraneError> {
-    let delta = match cfg.prepare.search_delta {
-        SearchDelta::Local => Delta::Local(&prep.d_used),
-        SearchDelta::Global => Delta::Global(prep.delta),
+    let delta = match (cfg.prepare.search_delta, prep.spacing.as_deref()) {
+        (SearchDelta::Local, _) => Delta::Local(&prep.d_used),
+        // The mean of the per-point spacing over the cuboid's points (membrane/spacing.rs).
+        (SearchDelta::Global, Some(spacing)) => Delta::Local(spacing),
+        (SearchDelta::Global, None) => Delta::Global(prep.delta),
     };
     let searcher = Searcher::new(&prep.index, delta, cfg.step.boundaries)?;
     let searcher = match &prep.attributes {

@@ -40,13 +40,15 @@ pub mod pole;
 pub mod prepare;
 pub mod regularize;
 pub mod schedule;
+pub mod spacing;
 pub mod step;
 pub mod view;
 
 pub use config::{
     AttributeWeight, Completion, ConfigError, FitConfig, GrowthConfig, InitConfig,
-    InsideDenserConfig, InwardConfig, MembraneConfig, PoleAxis, PoleTensionConfig, PrepareConfig,
-    RegularizeConfig, ScheduleConfig, SearchDelta, StepConfig, ViewConfig,
+    InsideDenserConfig, InwardConfig, LocalSpacingConfig, MembraneConfig, PoleAxis,
+    PoleTensionConfig, PrepareConfig, RegularizeConfig, ScheduleConfig, SearchDelta, StepConfig,
+    ViewConfig,
 };
 pub use extract::{extract_mesh, SEPARABILITY_CHANNEL};
 

@@ -8,13 +8,24 @@
 //!
 //! 1. voxelise the cloud at `voxel = c·δ`;
 //! 2. a voxel is *occupied* when its 3×3×3 neighbourhood holds at least
-//!    `min_points` points (sparse outliers do not occupy);
+//!    `min_points` points (sparse outliers do not occupy); with the local
+//!    spacing of [`super::spacing`] each point counts for the area it
+//!    samples, `(δ_i/δ)²`, so a thinly sampled surface still closes the
+//!    shell (one gap lets the flood fill below leak into the object, and the
+//!    inward force then cuts through the thin part);
 //! 3. occupied voxels are dilated once, then the empty voxels connected to
 //!    the grid border (flood fill, 6-connectivity) are *outside*.
 //!
 //! Everything else (the shell and the cavity it encloses) is inside.
 
 use crate::cloud::Vec3;
+
+/// One point's count in the voxel sums (weights are counted in its multiples).
+const WEIGHT_UNIT: u32 = 16;
+
+/// Largest count of one point, in [`WEIGHT_UNIT`]s × 16 (keeps the 3×3×3
+/// sums far from `u32::MAX`).
+const MAX_WEIGHT: f64 = 65_536.0;
 
 /// A voxel grid labelling space outside the object.
 #[derive(Debug, Clone)]
@@ -30,9 +41,36 @@ impl OutsideGrid {
     /// The grid is padded by two voxels around the points' bounding box; at
     /// most `max_cells` cells are used (the voxel is enlarged if needed).
     pub fn new(points: &[Vec3], voxel: f64, min_points: usize, max_cells: usize) -> Option<Self> {
+        Self::weighted(points, None, voxel, min_points, max_cells)
+    }
+
+    /// [`Self::new`] with point `i` counting `weights[i]` times (in steps of
+    /// 1/16) toward `min_points`: the area weights `(δ_i/δ)²` of the local
+    /// spacing ([`super::spacing`]), so that a thinly sampled part of the
+    /// surface occupies its voxels as a densely sampled one does (a surface
+    /// crossing a block holds about `area/δ_i²` points). Without weights (or
+    /// with a length mismatch) every point counts once.
+    pub fn weighted(
+        points: &[Vec3],
+        weights: Option<&[f64]>,
+        voxel: f64,
+        min_points: usize,
+        max_cells: usize,
+    ) -> Option<Self> {
         if points.is_empty() || voxel.is_nan() || voxel <= 0.0 || !voxel.is_finite() {
             return None;
         }
+        let weights = weights.filter(|w| w.len() == points.len());
+        let unit = |i: usize| -> u32 {
+            weights.map_or(WEIGHT_UNIT, |w| {
+                let v = (w[i] * f64::from(WEIGHT_UNIT)).round();
+                if v.is_finite() {
+                    v.clamp(0.0, MAX_WEIGHT) as u32
+                } else {
+                    WEIGHT_UNIT
+                }
+            })
+        };
         let mut lo = Vec3::repeat(f64::INFINITY);
         let mut hi = Vec3::repeat(f64::NEG_INFINITY);
         for p in points {
@@ -59,16 +97,18 @@ impl OutsideGrid {
         let cells = nx * ny * nz;
         let id = |x: usize, y: usize, z: usize| (z * ny + y) * nx + x;
         let mut count = vec![0u32; cells];
-        for p in points {
+        for (i, p) in points.iter().enumerate() {
             let q = (p - origin) * inv_voxel;
             let (x, y, z) = (q.x as usize, q.y as usize, q.z as usize);
             if x < nx && y < ny && z < nz {
-                count[id(x, y, z)] += 1;
+                let c = &mut count[id(x, y, z)];
+                *c = c.saturating_add(unit(i));
             }
         }
+        let need = (min_points as u64).saturating_mul(u64::from(WEIGHT_UNIT));
         let occupied: Vec<bool> = box_sum(count, dims)
             .iter()
-            .map(|&c| c as usize >= min_points)
+            .map(|&c| u64::from(c) >= need)
             .collect();
         let solid = dilate(&occupied, dims);
         let outside = flood_outside(&solid, dims);

@@ -46,6 +46,9 @@ pub(crate) struct Prepared {
     /// The d_i of the used points (δ where only δ is known).
     pub(crate) d_used: Vec<f64>,
     pub(crate) delta: f64,
+    /// The per-point spacing δ_i of `prepare.local_spacing` (with the global
+    /// δ and exact d_i only).
+    pub(crate) spacing: Option<Vec<f64>>,
     /// Longest bounding-box edge of the used points.
     pub(crate) scale: f64,
     pub(crate) view: Option<view::ViewBuffer>,
@@ -163,13 +166,19 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
         (quantile(&mut d_order, p.delta_quantile, scale) * p.delta_scale).max(1e-9 * scale)
     };
     // Per-point d_i of the used points (the sampled density knows only δ).
-    let mut d_used = if d_kept.len() == points.len() {
+    let exact = d_kept.len() == points.len();
+    let mut d_used = if exact {
         d_kept
     } else {
         vec![delta; points.len()]
     };
     let mut points = points;
     let completed = complete_view(cfg, view.as_mut(), &mut points, &mut d_used);
+    let spacing = p
+        .local_spacing
+        .as_ref()
+        .filter(|_| exact && p.search_delta == SearchDelta::Global)
+        .map(|l| super::spacing::local_spacing(&points, &d_used, delta, l));
     let index = SpatialIndex::new(&points)?;
     // Weighted mode (paper Eq. 9): the attribute channels of the used points.
     let attributes = if cfg.step.attributes.is_empty() && cfg.step.spatial_weight == 1.0 {
@@ -178,7 +187,7 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
         let used: Vec<usize> = keep.iter().map(|&k| finite_idx[k]).collect();
         Some(attribute_set(&cloud.select(&used), cfg, delta)?)
     };
-    let outside = outside_grid(cfg, &points, delta, view.as_ref());
+    let outside = outside_grid(cfg, &points, spacing.as_deref(), delta, view.as_ref());
     Ok(Prepared {
         counts: PointCounts {
             input: points_in,
@@ -191,6 +200,7 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
         points,
         d_used,
         delta,
+        spacing,
         scale,
         view,
         index,
@@ -225,17 +235,23 @@ fn complete_view(
 }
 
 /// The occupancy grid of the inward force (`None` when it is off or the
-/// grid would be too large). The occluded back of a single view is
-/// unknown, not empty — except beyond the back of the completion.
+/// grid would be too large); with the local spacing `spacing`, each point
+/// counts for the area it samples, `(δ_i/δ)²`. The occluded back of a
+/// single view is unknown, not empty — except beyond the back of the
+/// completion.
 fn outside_grid(
     cfg: &MembraneConfig,
     points: &[Vec3],
+    spacing: Option<&[f64]>,
     delta: f64,
     view: Option<&view::ViewBuffer>,
 ) -> Option<OutsideGrid> {
     let inward = cfg.step.inward.as_ref()?;
-    OutsideGrid::new(
+    let weights: Option<Vec<f64>> =
+        spacing.map(|s| s.iter().map(|&d| (d / delta).powi(2)).collect());
+    OutsideGrid::weighted(
         points,
+        weights.as_deref(),
         inward.voxel_delta * delta,
         inward.min_points,
         1 << 22,
@@ -309,8 +325,10 @@ pub fn thin<T: Copy>(points: Vec<T>, cap: usize) -> Vec<T> {
 
 /// The points kept by the outlier filter (indices into the points of
 /// `knn`) and the d_i (paper Eq. 5) of every kept point: every point's
-/// k-NN distance, and `d_i ≤ outlier_factor · median` keeps it (every
-/// point without a factor).
+/// k-NN distance, and `d_i ≤ outlier_factor · median` keeps it (every point
+/// without a factor; with `local_spacing` also a point within
+/// `outlier_factor` of its kept neighbours' d_i,
+/// [`super::spacing::kept_relative`]).
 fn exact_density(
     knn: &KnnIndex,
     cfg: &PrepareConfig,
@@ -318,8 +336,17 @@ fn exact_density(
     let density = Density::from_index(knn, cfg.knn_k)?;
     let d_all = density.per_point();
     let limit = cfg.outlier_factor.map(|f| f * density.median());
-    let keep = kept_or_all(knn.len(), limit.is_some(), |k| {
-        limit.is_some_and(|l| d_all[k] <= l)
+    // With the local spacing, a point as sparse as its kept neighbours is
+    // kept too (membrane/spacing.rs).
+    let relative = match (cfg.outlier_factor, limit, &cfg.local_spacing) {
+        (Some(f), Some(l), Some(ls)) if cfg.search_delta == SearchDelta::Global => Some(
+            super::spacing::kept_relative(knn.points(), d_all, l, f, ls.neighbours),
+        ),
+        _ => None,
+    };
+    let keep = kept_or_all(knn.len(), limit.is_some(), |k| match &relative {
+        Some(r) => r[k],
+        None => limit.is_some_and(|l| d_all[k] <= l),
     });
     let d_kept = keep.iter().map(|&k| d_all[k]).collect();
     Ok((keep, d_kept))
