@@ -54,11 +54,18 @@ fn quick_bench_writes_finite_scores_and_sphere_is_reconstructed() {
         assert!(run["watertight"].is_boolean(), "{what}: no watertight flag");
     };
     let rows = json["table1"]["rows"].as_array().unwrap();
-    assert_eq!(rows.len(), 4, "quick Table 1 on the sphere: 4 conditions");
+    assert_eq!(
+        rows.len(),
+        5,
+        "quick Table 1 on the sphere: the paper's 4 conditions and non-uniform"
+    );
     for r in rows {
         finite(&r["run"], &format!("{} / {}", r["shape"], r["condition"]));
     }
-    for sphere in rows {
+    // The paper's conditions; the non-uniform one is the open weakness of
+    // the default configuration (issue 20: F 0.57 here with
+    // `prepare.local_spacing` off, its default) and is scored, not bounded.
+    for sphere in rows.iter().filter(|r| r["condition"] != "non_uniform") {
         assert_eq!(sphere["shape"], "sphere");
         let f = sphere["run"]["scores"]["fscore"].as_f64().unwrap();
         assert!(f >= 0.95, "sphere F-score {f} ({})", sphere["condition"]);
