@@ -221,8 +221,10 @@ fn bench_plots_the_sweep_and_f_per_condition_beside_the_peers() {
             .unwrap();
     const CONDITIONS: [&str; 4] = ["original", "noise", "region_outliers", "surface_outliers"];
     let summaries = report["table1"]["genus0"].as_array().unwrap();
+    // sepmem also has a bar for the non-uniform condition (no peer figure).
     let ours: Vec<f64> = CONDITIONS
         .iter()
+        .chain(&["non_uniform"])
         .map(|c| {
             let s = summaries.iter().find(|s| s["group"] == *c).unwrap();
             s["fscore"].as_f64().unwrap()
