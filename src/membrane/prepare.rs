@@ -340,7 +340,7 @@ fn exact_density(
     // kept too (membrane/spacing.rs).
     let relative = match (cfg.outlier_factor, limit, &cfg.local_spacing) {
         (Some(f), Some(l), Some(ls)) if cfg.search_delta == SearchDelta::Global => Some(
-            super::spacing::kept_relative(knn.points(), d_all, l, f, ls.neighbours),
+            super::spacing::kept_relative(knn, d_all, l, f, ls.neighbours),
         ),
         _ => None,
     };

@@ -52,6 +52,7 @@
 use super::config::LocalSpacingConfig;
 use crate::cloud::Vec3;
 use crate::density::median_of;
+use crate::spatial::KnnIndex;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use std::num::NonZero;
@@ -107,26 +108,25 @@ const RELATIVE_PASSES: usize = 16;
 /// mostly dropped (9 of 72 points kept; the unit test uses 8:1, the bench
 /// condition).
 pub(crate) fn kept_relative(
-    points: &[Vec3],
+    index: &KnnIndex,
     d: &[f64],
     limit: f64,
     factor: f64,
     neighbours: usize,
 ) -> Vec<bool> {
     let mut keep: Vec<bool> = d.iter().map(|&v| v <= limit).collect();
+    let points = index.points();
     if points.len() != d.len() || keep.iter().all(|&k| k) {
         return keep;
     }
-    let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coords);
-    let qty = NonZero::new((neighbours + 1).min(points.len())).unwrap_or(NonZero::<usize>::MIN);
+    let qty = (neighbours + 1).min(points.len());
     let need = neighbours.div_ceil(2).max(1);
     let near: Vec<(usize, Vec<usize>)> = (0..points.len())
         .into_par_iter()
         .filter(|&i| !keep[i])
         .map(|i| {
-            let nn = tree.nearest_n::<SquaredEuclidean>(&coords[i], qty);
-            let others = nn.iter().map(|n| n.item as usize).filter(|&j| j != i);
+            let nn = index.nearest_n(&points[i], qty);
+            let others = nn.iter().map(|&(_, j)| j).filter(|&j| j != i);
             (i, others.collect())
         })
         .collect();
@@ -227,7 +227,7 @@ mod tests {
         }
         let d = Density::new(&pts, 8).unwrap();
         let limit = 2.0 * d.median();
-        let keep = kept_relative(&pts, d.per_point(), limit, 2.0, 32);
+        let keep = kept_relative(&KnnIndex::new(pts.clone()), d.per_point(), limit, 2.0, 32);
         let sparse_end =
             |k: &dyn Fn(usize) -> bool| (0..6000).filter(|&i| pts[i].x > 0.9 && k(i)).count();
         let global = sparse_end(&|i| d.per_point()[i] <= limit);
