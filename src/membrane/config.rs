@@ -351,6 +351,10 @@ pub struct FitConfig {
     /// when the ring stretch exceeds this ratio (whole objects); `None`
     /// turns it off.
     pub redistribute_stretch: Option<f64>,
+    /// Most MiB of factored fit systems kept for later frames (least
+    /// recently used out first); a [`super::Membrane`] and its clones
+    /// share one cache.
+    pub cache_mib: usize,
 }
 
 impl Default for FitConfig {
@@ -361,6 +365,7 @@ impl Default for FitConfig {
             alpha_warm: 1.5,
             roughness: 1e-2,
             redistribute_stretch: Some(1.3),
+            cache_mib: 32,
         }
     }
 }
@@ -647,6 +652,11 @@ fn validate_fit(f: &FitConfig) -> Result<(), ConfigError> {
             .is_none_or(|s| s > 1.0 && s.is_finite()),
         "fit.redistribute_stretch",
         "must be above 1 (null turns it off)",
+    )?;
+    check(
+        (1..=1 << 20).contains(&f.cache_mib),
+        "fit.cache_mib",
+        "must be 1 to 1048576 (MiB)",
     )
 }
 

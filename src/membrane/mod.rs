@@ -299,7 +299,8 @@ impl Membrane {
     /// [`ConfigError`] naming the first bad key (or `step.threads` when the
     /// worker pool cannot be created).
     pub fn new(cfg: MembraneConfig) -> Result<Self, ConfigError> {
-        Self::with_cache(cfg, Arc::new(FitCache::default()), None)
+        let fits = Arc::new(FitCache::new(cfg.fit.cache_mib));
+        Self::with_cache(cfg, fits, None)
     }
 
     fn with_cache(

@@ -136,6 +136,18 @@ impl FitSystem {
         })
     }
 
+    /// Bytes a cache holds for this system: the shared factor and sample
+    /// rows (a clone copies neither) and the layout's parameter arrays.
+    pub fn cached_bytes(&self) -> usize {
+        let l = &self.layout;
+        std::mem::size_of_val(&*self.chol)
+            + std::mem::size_of_val(&*self.rows)
+            + std::mem::size_of_val(l.us.as_slice())
+            + std::mem::size_of_val(l.vs.as_slice())
+            + std::mem::size_of_val(l.bu.as_slice())
+            + std::mem::size_of_val(l.bv.as_slice())
+    }
+
     /// The sample layout this system was built for.
     pub fn layout(&self) -> &Layout {
         &self.layout
