@@ -46,6 +46,12 @@ struct Held {
 }
 
 impl Held {
+    /// The next value of the use clock.
+    fn tick(&mut self) -> u64 {
+        self.clock += 1;
+        self.clock
+    }
+
     /// Drop least recently used systems until `extra` more bytes fit in
     /// `budget` (or nothing is left).
     fn make_room(&mut self, extra: usize, budget: usize) {
@@ -99,8 +105,7 @@ impl FitCache {
 
     fn lookup(&self, key: &FitKey) -> Option<FitSystem> {
         let mut held = self.held();
-        held.clock += 1;
-        let now = held.clock;
+        let now = held.tick();
         let c = held.map.get_mut(key)?;
         c.used = now;
         Some(c.sys.clone())
@@ -127,8 +132,7 @@ impl FitCache {
         if bytes <= self.budget {
             let mut held = self.held();
             held.make_room(bytes, self.budget);
-            held.clock += 1;
-            let used = held.clock;
+            let used = held.tick();
             let cached = Cached {
                 sys: sys.clone(),
                 bytes,
