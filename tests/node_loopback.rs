@@ -88,10 +88,16 @@ impl Backend for TestBackend {
             OutputKind::CollisionObjects => {
                 RosType::new("moveit_msgs/msg/CollisionObject", "RIHS01_c")
             }
+            OutputKind::Model => RosType::new("sensor_msgs/msg/PointCloud2", "RIHS01_in"),
         }
     }
     fn diagnostics_type(&self) -> RosType {
         RosType::new("diagnostic_msgs/msg/DiagnosticArray", "RIHS01_d")
+    }
+    // Like the pipeline backend without `pipeline.model`: the node must not
+    // declare a publisher for it (the token count below).
+    fn publishes(&self, kind: OutputKind) -> bool {
+        kind != OutputKind::Model
     }
     fn processor(&self, topic: &str) -> Box<dyn TopicProcessor> {
         Box::new(TestProc {

@@ -123,7 +123,7 @@ fn mosd_bag_replays_into_watertight_meshes_on_the_scan() {
                 cold
             );
         }
-        let msgs = frame.messages("sepmem");
+        let msgs = frame.messages("sepmem", &cfg.pipeline.label_channel);
         for (mesh, diag) in &msgs.objects {
             out.write("/sepmem/mesh", m.log_time, mesh).unwrap();
             out.write("/sepmem/frame_diagnostics", m.log_time, diag)

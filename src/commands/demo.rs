@@ -103,7 +103,9 @@ pub fn run(out: &Path, cfg: &Config, rate: f64) -> Result<()> {
             subs.push(s);
             inboxes.push((name, i));
         }
-        inboxes.push((DiagnosticArray::TYPE_NAME, node.diagnostics()));
+        let (s, i) = node.collect_diagnostics().await?;
+        subs.push(s);
+        inboxes.push((DiagnosticArray::TYPE_NAME, i));
         let observed = Observed {
             _subs: subs,
             inboxes,

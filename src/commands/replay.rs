@@ -406,7 +406,7 @@ pub fn run_opts(
             }
         }
         if let Some(w) = writer.as_mut() {
-            let msgs = frame.messages(&p.marker_namespace);
+            let msgs = frame.messages(&p.marker_namespace, &p.label_channel);
             for (mesh, diag) in &msgs.objects {
                 w.write(&expand_topic_template(&o.mesh, &m.topic), m.log_time, mesh)?;
                 w.write(
@@ -420,6 +420,13 @@ pub fn run_opts(
                 m.log_time,
                 &msgs.markers,
             )?;
+            if let Some(model) = &msgs.model {
+                w.write(
+                    &expand_topic_template(&o.model, &m.topic),
+                    m.log_time,
+                    model,
+                )?;
+            }
         }
     }
     bar.finish_and_clear();

@@ -29,6 +29,7 @@ use sepmem::wire::{self, RosMessage};
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
+use zenoh::bytes::ZBytes;
 
 /// The hostile kinds and the reason each must be counted under.
 pub const KINDS: [(&str, &str); 5] = [
@@ -39,8 +40,10 @@ pub const KINDS: [(&str, &str); 5] = [
     ("malformed", reasons::MALFORMED_CDR),
 ];
 
-/// Makes the `k`-th message of a hostile stream.
-type Maker = Box<dyn FnMut(u64) -> Vec<u8> + Send>;
+/// Makes the `k`-th message of a hostile stream. A fixed message is a
+/// shared [`ZBytes`], put without a copy: the harness's own 8-9 MiB copies
+/// would otherwise sit in the process's RSS next to the node's.
+type Maker = Box<dyn FnMut(u64) -> ZBytes + Send>;
 
 /// One hostile stream.
 pub struct Hostile {
@@ -136,15 +139,15 @@ fn label_bomb() -> Result<Vec<u8>> {
 /// # Errors
 /// When a message cannot be encoded.
 pub fn streams(max_bytes: usize, transport_limit: usize, healthy: Vec<u8>) -> Result<Vec<Hostile>> {
-    let poison = poisoned()?;
-    let bomb = label_bomb()?;
+    let poison = ZBytes::from(poisoned()?);
+    let bomb = ZBytes::from(label_bomb()?);
     let mut rng = Rng(7);
     let churn_points = ball(&mut rng, Vec3::new(-0.5, 0.0, 1.2), 0.08, 2000);
-    let big = vec![0u8; transport_limit + (1 << 20)];
+    let big = ZBytes::from(vec![0u8; transport_limit + (1 << 20)]);
     let mut just_over =
         encode_pointcloud2(&PointCloud::from_points(vec![Vec3::zeros(); 4]), header());
     just_over.data = vec![0u8; max_bytes + 1024];
-    let just_over = wire::encode(&just_over)?;
+    let just_over = ZBytes::from(wire::encode(&just_over)?);
     let ms = Duration::from_millis;
     Ok(vec![
         Hostile {
@@ -162,7 +165,7 @@ pub fn streams(max_bytes: usize, transport_limit: usize, healthy: Vec<u8>) -> Re
             period: ms(100),
             make: Box::new(move |k| {
                 let labels = vec![(k % 1_000_000 + 1) as f32; churn_points.len()];
-                labelled(churn_points.clone(), labels).unwrap_or_default()
+                ZBytes::from(labelled(churn_points.clone(), labels).unwrap_or_default())
             }),
         },
         Hostile {
@@ -179,7 +182,7 @@ pub fn streams(max_bytes: usize, transport_limit: usize, healthy: Vec<u8>) -> Re
         Hostile {
             name: "malformed",
             period: ms(200),
-            make: Box::new(move |k| malformed(&healthy, k, &mut rng)),
+            make: Box::new(move |k| ZBytes::from(malformed(&healthy, k, &mut rng))),
         },
     ])
 }

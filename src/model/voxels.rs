@@ -16,6 +16,14 @@
 
 use crate::cloud::Vec3;
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, DefaultHasher};
+
+/// A hash map with fixed keys (SipHash with zero keys). The fused points
+/// come out in the map's order, and the membrane's thinning keeps points by
+/// index; with std's per-process random keys the same bag gave a differently
+/// ordered fused cloud in every run, so replays with `pipeline.model` were
+/// not repeatable and the node's model output differed from `replay`'s.
+type FixedMap<K, V> = HashMap<K, V, BuildHasherDefault<DefaultHasher>>;
 
 /// Integer voxel coordinates.
 pub type VoxelKey = [i32; 3];
@@ -49,7 +57,7 @@ impl Voxel {
 pub struct VoxelMemory {
     size: f64,
     max_voxels: usize,
-    voxels: HashMap<VoxelKey, Voxel>,
+    voxels: FixedMap<VoxelKey, Voxel>,
 }
 
 impl VoxelMemory {
@@ -59,7 +67,7 @@ impl VoxelMemory {
         Self {
             size,
             max_voxels: max_voxels.max(1),
-            voxels: HashMap::new(),
+            voxels: FixedMap::default(),
         }
     }
 
@@ -78,7 +86,7 @@ impl VoxelMemory {
     /// this frame's points, blended into the stored mean with weight
     /// `current_weight`. Returns the number of voxels the frame hit.
     pub fn insert(&mut self, points: &[Vec3], frame: u32, current_weight: f32) -> usize {
-        let mut frame_means: HashMap<VoxelKey, (Vec3, u32)> = HashMap::new();
+        let mut frame_means: FixedMap<VoxelKey, (Vec3, u32)> = FixedMap::default();
         for p in points.iter().filter(|p| p.iter().all(|c| c.is_finite())) {
             let e = frame_means.entry(self.key(p)).or_insert((Vec3::zeros(), 0));
             e.0 += p;
@@ -183,7 +191,7 @@ impl VoxelMemory {
 
     /// Forget everything.
     pub fn clear(&mut self) {
-        self.voxels = HashMap::new();
+        self.voxels = FixedMap::default();
     }
 }
 

@@ -27,23 +27,30 @@ pub enum OutputKind {
     FrameDiagnostics,
     /// `moveit_msgs/CollisionObject` (ADD / MOVE / REMOVE per object).
     CollisionObjects,
+    /// `sensor_msgs/PointCloud2`: the fused model of every object of the
+    /// frame (`pipeline.model`), labelled.
+    Model,
 }
 
 impl OutputKind {
     /// All kinds, in publication order.
-    pub const ALL: [OutputKind; 4] = [
+    pub const ALL: [OutputKind; 5] = [
         OutputKind::Mesh,
         OutputKind::Markers,
         OutputKind::FrameDiagnostics,
         OutputKind::CollisionObjects,
+        OutputKind::Model,
     ];
 
     /// Whether one message of this kind carries the whole frame (every
-    /// object's marker after a DELETEALL; the frame's diagnostics), so
-    /// that its last message is all a late joiner needs. Mesh and
-    /// collision-object messages are one per object.
+    /// object's marker after a DELETEALL; the frame's diagnostics; every
+    /// object's fused model), so that its last message is all a late joiner
+    /// needs. Mesh and collision-object messages are one per object.
     pub fn whole_frame(self) -> bool {
-        matches!(self, OutputKind::Markers | OutputKind::FrameDiagnostics)
+        matches!(
+            self,
+            OutputKind::Markers | OutputKind::FrameDiagnostics | OutputKind::Model
+        )
     }
 }
 
@@ -145,6 +152,13 @@ pub trait Backend: Send + Sync + 'static {
     fn input_type(&self) -> RosType;
     /// Type published on an output topic.
     fn output_type(&self, kind: OutputKind) -> RosType;
+    /// Whether processors ever produce `kind` (the node declares no
+    /// publisher for an output that never comes, e.g. the model without
+    /// `pipeline.model`).
+    fn publishes(&self, kind: OutputKind) -> bool {
+        let _ = kind;
+        true
+    }
     /// `diagnostic_msgs/msg/DiagnosticArray`.
     fn diagnostics_type(&self) -> RosType;
     /// Per-frame deadline, measured from receipt (`None`: no deadline).

@@ -67,6 +67,8 @@ pub struct OutputTopics {
     pub mesh: String,
     /// sepmem per-frame diagnostics topic template.
     pub frame_diagnostics: String,
+    /// Fused-model topic template (published with `pipeline.model` only).
+    pub model: String,
     /// DiagnosticArray topic (about 1 Hz, all streams).
     pub diagnostics: String,
     /// MoveIt collision objects (`None`: not published).
@@ -98,6 +100,7 @@ impl OutputTopics {
             OutputKind::Markers => Some(&self.markers),
             OutputKind::Mesh => Some(&self.mesh),
             OutputKind::FrameDiagnostics => Some(&self.frame_diagnostics),
+            OutputKind::Model => Some(&self.model),
             OutputKind::CollisionObjects => {
                 self.collision_objects.as_ref().map(|c| c.topic.as_str())
             }

@@ -204,6 +204,10 @@ impl EngineProcessor {
         let header = &frame.sample.header;
         let markers = outputs::cleared_markers(std::mem::take(&mut out.markers), header, &self.ns);
         out.encode(OutputKind::Markers, &markers);
+        let label = &self.engine.pipeline.label_channel;
+        if let Some(m) = outputs::model_cloud(&frame.results(), header, label) {
+            out.encode(OutputKind::Model, &m);
+        }
         self.collision_objects(frame, &mut out);
         out
     }
@@ -274,7 +278,12 @@ impl Backend for PipelineBackend {
             OutputKind::Mesh => ty::<SurfaceMesh>(),
             OutputKind::FrameDiagnostics => ty::<FrameDiagnostics>(),
             OutputKind::CollisionObjects => ty::<CollisionObject>(),
+            OutputKind::Model => ty::<PointCloud2>(),
         }
+    }
+
+    fn publishes(&self, kind: OutputKind) -> bool {
+        kind != OutputKind::Model || self.pipeline.model.is_some()
     }
 
     fn diagnostics_type(&self) -> RosType {

@@ -241,6 +241,9 @@ pub fn run(
                 let Some(template) = cfg.outputs.template(kind) else {
                     continue;
                 };
+                if !backend.publishes(kind) {
+                    continue;
+                }
                 let out = expand_topic_template(template, &topic);
                 let p = node
                     .create_publisher_untyped(

@@ -539,6 +539,9 @@ async fn declare_stream(ctx: &StreamCtx) -> (Option<EntityToken>, Publishers) {
         let Some(template) = ctx.cfg.outputs.template(kind) else {
             continue;
         };
+        if !ctx.backend.publishes(kind) {
+            continue;
+        }
         let out = expand_topic_template(template, topic);
         let ty = tr.advertised(&ctx.backend.output_type(kind));
         match ctx

@@ -16,7 +16,7 @@ use super::objects::{cap_objects, ObjectBook, Quality};
 use super::{outputs, Deadlines, Membranes, PipelineConfig, PipelineError, StreamKey};
 use crate::cloud::PointCloud;
 use crate::membrane::{ConfigError, MembraneConfig};
-use crate::wire::msgs::{FrameDiagnostics, Header, Marker, MarkerArray, SurfaceMesh};
+use crate::wire::msgs::{FrameDiagnostics, Header, Marker, MarkerArray, PointCloud2, SurfaceMesh};
 use crate::wire::pointcloud2::{
     decode_pointcloud2_cdr, split_by_label, PointCloud2Error, WireConfig,
 };
@@ -269,6 +269,9 @@ pub struct FrameMessages {
     pub objects: Vec<(SurfaceMesh, FrameDiagnostics)>,
     /// DELETEALL, then a TRIANGLE_LIST per reconstructed object.
     pub markers: MarkerArray,
+    /// The objects' fused models (`pipeline.model`), labelled by the
+    /// label channel.
+    pub model: Option<PointCloud2>,
 }
 
 impl FrameOutput {
@@ -280,8 +283,9 @@ impl FrameOutput {
             .collect()
     }
 
-    /// The output messages of the frame (marker namespace `ns`).
-    pub fn messages(&self, ns: &str) -> FrameMessages {
+    /// The output messages of the frame (marker namespace `ns`, the fused
+    /// models' object labels in channel `label`).
+    pub fn messages(&self, ns: &str, label: &str) -> FrameMessages {
         let header = &self.sample.header;
         let shown = || {
             self.processed
@@ -305,6 +309,7 @@ impl FrameOutput {
                 header,
                 ns,
             ),
+            model: outputs::model_cloud(&self.results(), header, label),
         }
     }
 }

@@ -251,6 +251,9 @@ pub struct FrameResult {
     pub motion: Option<align::Rigid>,
     /// Wall-clock time of the frame in ms.
     pub latency_ms: f64,
+    /// The object's fused model after this frame, in this frame's cloud
+    /// frame (one point per voxel; `None` unless `pipeline.model` is set).
+    pub model: Option<Vec<Vec3>>,
 }
 
 /// Running counts of a stream.
@@ -571,6 +574,7 @@ impl Tracker {
             reconstruction: rec,
             motion,
             latency_ms: start.elapsed().as_secs_f64() * 1e3,
+            model: self.fused.as_ref().map(|f| f.model.points_in(&f.pose)),
         })
     }
 

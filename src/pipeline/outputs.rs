@@ -15,8 +15,12 @@
 
 use super::objects::Quality;
 use super::{FrameResult, StartPath};
+use crate::cloud::{Attribute, PointCloud};
 use crate::wire::convert::{delete_all_marker, to_shape_mesh, to_triangle_list_marker};
-use crate::wire::msgs::{ColorRGBA, FrameDiagnostics, Header, Marker, MarkerArray, SurfaceMesh};
+use crate::wire::msgs::{
+    ColorRGBA, FrameDiagnostics, Header, Marker, MarkerArray, PointCloud2, SurfaceMesh,
+};
+use crate::wire::pointcloud2::encode_pointcloud2;
 
 /// Name of the per-vertex separability channel in membrane meshes.
 pub const SEPARABILITY: &str = "separability";
@@ -152,4 +156,32 @@ pub fn cleared_markers(markers: Vec<Marker>, header: &Header, ns: &str) -> Marke
     all.push(clear);
     all.extend(markers);
     MarkerArray { markers: all }
+}
+
+/// The fused models of a frame's objects (`pipeline.model`) as one
+/// PointCloud2 in the input's frame: `x y z` and, per point, its object's
+/// label in channel `label` (0 for an unlabelled stream). `None` when no
+/// object keeps a model.
+pub fn model_cloud(results: &[&FrameResult], header: &Header, label: &str) -> Option<PointCloud2> {
+    let with_model: Vec<(&Vec<crate::cloud::Vec3>, f32)> = results
+        .iter()
+        .filter_map(|r| Some((r.model.as_ref()?, r.stream.label.unwrap_or(0) as f32)))
+        .collect();
+    if with_model.is_empty() {
+        return None;
+    }
+    let n = with_model.iter().map(|(m, _)| m.len()).sum();
+    let (mut points, mut labels) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    for (m, l) in with_model {
+        points.extend_from_slice(m);
+        labels.extend(std::iter::repeat_n(l, m.len()));
+    }
+    let cloud = PointCloud {
+        points,
+        attributes: vec![Attribute {
+            name: label.to_string(),
+            values: labels,
+        }],
+    };
+    Some(encode_pointcloud2(&cloud, header.clone()))
 }

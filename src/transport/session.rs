@@ -22,6 +22,7 @@ use super::liveliness::{Durability, EntityKind, Qos, Reliability, Token, TopicTo
 use super::{TransportConfig, TransportError};
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
 use std::sync::Arc;
+use zenoh::bytes::ZBytes;
 use zenoh::Wait;
 use zenoh_ext::AdvancedPublisherBuilderExt;
 
@@ -422,11 +423,12 @@ impl RosPublisher {
         })
     }
 
-    /// Put one serialized message.
+    /// Put one serialized message (a `Vec<u8>`, or a `ZBytes` that shares
+    /// its buffer: a repeated payload is then not copied per put).
     ///
     /// # Errors
     /// [`TransportError::Zenoh`] if zenoh refuses the put.
-    pub async fn put(&self, payload: Vec<u8>) -> Result<(), TransportError> {
+    pub async fn put(&self, payload: impl Into<ZBytes>) -> Result<(), TransportError> {
         let attachment = self.next_attachment();
         match &self.publisher {
             Sink::Plain(p) => p.put(payload).attachment(attachment).await,
@@ -440,7 +442,7 @@ impl RosPublisher {
     ///
     /// # Errors
     /// [`TransportError::Zenoh`] if zenoh refuses the put.
-    pub fn put_sync(&self, payload: Vec<u8>) -> Result<(), TransportError> {
+    pub fn put_sync(&self, payload: impl Into<ZBytes>) -> Result<(), TransportError> {
         let attachment = self.next_attachment();
         match &self.publisher {
             Sink::Plain(p) => p.put(payload).attachment(attachment).wait(),
