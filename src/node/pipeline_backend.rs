@@ -204,9 +204,11 @@ impl EngineProcessor {
         let header = &frame.sample.header;
         let markers = outputs::cleared_markers(std::mem::take(&mut out.markers), header, &self.ns);
         out.encode(OutputKind::Markers, &markers);
-        let label = &self.engine.pipeline.label_channel;
-        if let Some(m) = outputs::model_cloud(&frame.results(), header, label) {
-            out.encode(OutputKind::Model, &m);
+        if self.engine.pipeline.model.is_some() {
+            let label = &self.engine.pipeline.label_channel;
+            if let Some(m) = outputs::model_cloud(&frame.results(), header, label) {
+                out.encode(OutputKind::Model, &m);
+            }
         }
         self.collision_objects(frame, &mut out);
         out

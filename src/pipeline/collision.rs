@@ -14,11 +14,12 @@
 //!   the centred mesh moved more than `move_tolerance_m` from the last
 //!   mesh sent (the membrane's sampling grid gives every frame the same
 //!   vertex order, so the vertices are compared one to one), at most once
-//!   per `shape_period_ms` of the clouds' stamps. Simplifying takes about
-//!   2 ms for a 4,800-triangle mesh (2.1 ms measured, 9,400 triangles 4.1
-//!   ms); a warm-tracked object's mesh changes a little every frame, so at
-//!   30 Hz × 4 streams it cost a quarter of a core of a 2-core machine, for
-//!   a planning scene that does not need new shapes 30 times a second.
+//!   per `shape_period_ms` of the clouds' stamps. Simplifying takes 2.1 ms
+//!   for a 4,800-triangle mesh and 4.1 ms for 9,400 (measured, release);
+//!   a turning object's mesh changes a little every frame, and a planning
+//!   scene does not need new shapes 30 times a second. In `sepmem demo`
+//!   the median latency went from 19.1 to 17.8 ms (3 runs each; the demo's
+//!   run-to-run spread is of the same order).
 //! * **MOVE** with empty geometry when only the pose changed (rigid
 //!   translation of an unchanged shape), or when the shape changed within
 //!   `shape_period_ms` of the last ADD.
@@ -171,6 +172,22 @@ impl CollisionObjects {
         }
     }
 
+    /// Whether the object sent as `s` stays as it is (a MOVE): its last ADD
+    /// is less than `shape_period_ms` before `stamp`, or no vertex of the
+    /// centred `shape` moved more than `move_tolerance_m`.
+    fn keeps(&self, s: &Sent, stamp: i64, shape: &[Vec3]) -> bool {
+        let period = i64::try_from(self.cfg.shape_period_ms)
+            .unwrap_or(i64::MAX)
+            .saturating_mul(1_000_000);
+        let tol = self.cfg.move_tolerance_m;
+        (s.added_ns..s.added_ns.saturating_add(period)).contains(&stamp)
+            || s.shape.len() == shape.len()
+                && s.shape
+                    .iter()
+                    .zip(shape)
+                    .all(|(a, b)| (a - b).norm() <= tol)
+    }
+
     /// The message for `stream`'s mesh of this frame: ADD (with the
     /// simplified mesh) when the shape changed, MOVE otherwise.
     ///
@@ -187,22 +204,13 @@ impl CollisionObjects {
             return Err(format!("collision object {stream}: empty mesh"));
         }
         let c = centroid(&mesh.vertices);
-        let shape: Vec<Vec3> = mesh.vertices.iter().map(|v| v - c).collect();
-        let tol = self.cfg.move_tolerance_m;
         let stamp = header.stamp.to_nanos();
-        let period = i64::try_from(self.cfg.shape_period_ms)
-            .unwrap_or(i64::MAX)
-            .saturating_mul(1_000_000);
-        let keep = self.sent.get(stream).is_some_and(|s| {
-            let recent = (s.added_ns..s.added_ns.saturating_add(period)).contains(&stamp);
-            recent
-                || s.shape.len() == shape.len()
-                    && s.shape
-                        .iter()
-                        .zip(&shape)
-                        .all(|(a, b)| (a - b).norm() <= tol)
-        });
-        if keep {
+        let shape: Vec<Vec3> = mesh.vertices.iter().map(|v| v - c).collect();
+        if self
+            .sent
+            .get(stream)
+            .is_some_and(|s| self.keeps(s, stamp, &shape))
+        {
             let mut msg = self.message(stream, header, CollisionObject::MOVE);
             msg.pose = pose_at(c);
             if let Some(s) = self.sent.get_mut(stream) {
