@@ -170,7 +170,12 @@ async fn the_node_publishes_the_fused_models_on_the_model_topic() {
         None,
         &[
             "pipeline.deadline_ms=0".into(),
-            "node.evict_after_ms=60000".into(),
+            // Lock step on a loaded machine: never evicted as silent between
+            // two frames (CI once stalled for a minute there).
+            "node.evict_after_ms=3600000".into(),
+            // Lock step on a loaded machine: the node (receipt time) must not
+            // forget an object the engine (log time) still tracks.
+            "pipeline.objects.forget_after_ms=600000".into(),
             "node.outputs_keep_all=true".into(),
             "node.transport.node_name=\"sepmem_model_test\"".into(),
         ],

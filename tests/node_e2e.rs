@@ -63,8 +63,11 @@ async fn play_and_score(bag_file: &str, node_name: &str, min_f: f64) -> BTreeMap
             "node.diagnostics_period_ms=200".into(),
             // Lock step: the next frame is published after the test's own
             // engine has run on it, which on a loaded machine can take
-            // seconds; no stream may be evicted as silent meanwhile.
-            "node.evict_after_ms=60000".into(),
+            // seconds; no stream may be evicted as silent meanwhile. CI once
+            // stalled for about a minute between two frames (the test ran 63 s
+            // instead of 9): the stream was evicted after 60 s and the next
+            // frame started cold in the node, warm in the engine.
+            "node.evict_after_ms=3600000".into(),
             // Lock step waits for every output: none may be dropped when the
             // loaded machine's zenoh tx thread falls behind.
             "node.outputs_keep_all=true".into(),
