@@ -6,6 +6,7 @@
 #![allow(clippy::unwrap_used)]
 
 use sepmem::config::Config;
+use sepmem::node::clock::mono_ns;
 use sepmem::node::runtime::{run, NodeSummary};
 use sepmem::node::{
     Backend, Frame, FrameResult, Level, NodeConfig, ObjectReport, Output, OutputKind, Shard,
@@ -27,6 +28,7 @@ fn payload(index: u64, busy_ms: u32) -> Vec<u8> {
 struct TestProc {
     topic: String,
     seen: Arc<Mutex<Vec<(String, u64)>>>,
+    receipts: Arc<Mutex<Vec<i64>>>,
 }
 
 impl TopicProcessor for TestProc {
@@ -37,6 +39,7 @@ impl TopicProcessor for TestProc {
                 ..FrameResult::default()
             };
         }
+        self.receipts.lock().unwrap().push(frame.received_ns);
         let index = u64::from_le_bytes(frame.payload[4..12].try_into().unwrap());
         let busy = u32::from_le_bytes(frame.payload[12..16].try_into().unwrap());
         std::thread::sleep(Duration::from_millis(u64::from(busy)));
@@ -70,8 +73,10 @@ impl TopicProcessor for TestProc {
     }
 }
 
+#[derive(Default)]
 struct TestBackend {
     seen: Arc<Mutex<Vec<(String, u64)>>>,
+    receipts: Arc<Mutex<Vec<i64>>>,
 }
 
 impl Backend for TestBackend {
@@ -103,6 +108,7 @@ impl Backend for TestBackend {
         Box::new(TestProc {
             topic: topic.to_string(),
             seen: self.seen.clone(),
+            receipts: self.receipts.clone(),
         })
     }
     fn encode_diagnostics(&self, _stamp: i64, _frame: &str, status: &[StatusEntry]) -> Vec<u8> {
@@ -194,6 +200,8 @@ fn spawn_node(
 /// `/{name}/**`, and a publisher on `/{name}/points`.
 struct Rig {
     seen: Arc<Mutex<Vec<(String, u64)>>>,
+    /// The receipt time of every frame a processor saw.
+    receipts: Arc<Mutex<Vec<i64>>>,
     stop_tx: tokio::sync::oneshot::Sender<()>,
     node: tokio::task::JoinHandle<NodeSummary>,
     markers: Inbox,
@@ -202,8 +210,8 @@ struct Rig {
 }
 
 async fn rig(h: &Participant, name: &str, cfg: NodeConfig) -> Rig {
-    let seen: Arc<Mutex<Vec<(String, u64)>>> = Arc::default();
-    let backend = Arc::new(TestBackend { seen: seen.clone() });
+    let backend = Arc::new(TestBackend::default());
+    let (seen, receipts) = (backend.seen.clone(), backend.receipts.clone());
     let (stop_tx, node) = spawn_node(cfg, backend);
     let (_markers_sub, markers) = collect(
         h,
@@ -217,6 +225,7 @@ async fn rig(h: &Participant, name: &str, cfg: NodeConfig) -> Rig {
         .unwrap();
     Rig {
         seen,
+        receipts,
         stop_tx,
         node,
         markers,
@@ -272,7 +281,10 @@ fn any_type(name: &str) -> RosType {
 async fn overload_keeps_newest_counts_drops_and_isolates_a_malformed_stream() {
     let (h, cfg) = harness("ovl").await;
     let seen: Arc<Mutex<Vec<(String, u64)>>> = Arc::default();
-    let backend = Arc::new(TestBackend { seen: seen.clone() });
+    let backend = Arc::new(TestBackend {
+        seen: seen.clone(),
+        ..TestBackend::default()
+    });
     let (stop_tx, node) = spawn_node(cfg, backend);
     let (_msub, meshes) = collect(&h, "/ovl/**", &any_type("sepmem_msgs/msg/SurfaceMesh")).await;
     let (_dsub, diags) = collect(
@@ -388,7 +400,10 @@ async fn two_shards_split_streams_without_overlap_or_gap() {
         let mut c = cfg.clone();
         c.shard = Shard { index, count: 2 };
         c.transport.node_name = format!("shd{index}");
-        let backend = Arc::new(TestBackend { seen: seen.clone() });
+        let backend = Arc::new(TestBackend {
+            seen: seen.clone(),
+            ..TestBackend::default()
+        });
         let (tx, node) = spawn_node(c, backend);
         stops.push(tx);
         nodes.push(node);
@@ -526,6 +541,28 @@ async fn liveliness(h: &Participant) -> Vec<Token> {
 /// end of the last processing (a publisher that waits for each result, as a
 /// lock-step player does, is not silent). Eviction is seen as the
 /// processor's DELETEALL markers.
+/// Silence, stalls and latencies are measured on the node's monotonic
+/// clock: the receipt time a processor sees lies between two readings of
+/// `clock::mono_ns` around the frame, not on the wall clock, which a robot's
+/// chrony may step by hours (a forward step would evict every stream and
+/// forget every label at once, a backward one keep silent ones for hours).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn receipt_times_are_on_the_monotonic_clock() {
+    let (h, cfg) = harness("mono").await;
+    let r = rig(&h, "mono", cfg).await;
+    let before = mono_ns();
+    let got = || !r.receipts.lock().unwrap().is_empty();
+    probe(&r.points, got, || payload(0, 0)).await;
+    let after = mono_ns();
+    let receipts = r.receipts.lock().unwrap().clone();
+    assert!(
+        receipts.iter().all(|t| (before..=after).contains(t)),
+        "receipts {receipts:?} outside [{before}, {after}]"
+    );
+    let summary = stop(r.stop_tx, r.node).await;
+    assert!(summary.clean_shutdown);
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_busy_stream_is_not_evicted_and_a_silent_one_is() {
     let (h, mut cfg) = harness("evb").await;
@@ -578,7 +615,10 @@ async fn a_stalled_or_greedy_stream_is_reported_and_the_others_keep_running() {
         burst_ms: 100.0,
     });
     let seen: Arc<Mutex<Vec<(String, u64)>>> = Arc::default();
-    let backend = Arc::new(TestBackend { seen: seen.clone() });
+    let backend = Arc::new(TestBackend {
+        seen: seen.clone(),
+        ..TestBackend::default()
+    });
     let (stop_tx, node) = spawn_node(cfg, backend);
     let (_dsub, diags) = collect(
         &h,

@@ -70,7 +70,8 @@ pub struct Frame {
     pub topic: String,
     /// Serialized input message (CDR with encapsulation header).
     pub payload: Vec<u8>,
-    /// Local receive time, ns since the Unix epoch.
+    /// Local receive time, ns on the node's monotonic clock
+    /// ([`super::clock::mono_ns`]): compared only with that clock.
     pub received_ns: i64,
     /// Publisher's source timestamp from the rmw_zenoh attachment, if any.
     pub source_ns: Option<i64>,

@@ -12,6 +12,7 @@
 
 pub mod backend;
 pub mod budget;
+pub mod clock;
 #[cfg(feature = "zenoh")]
 pub mod loopback;
 pub mod pipeline_backend;

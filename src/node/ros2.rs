@@ -21,6 +21,7 @@
 //! module (`--features ros2,r2r/doc-only`, no ROS needed).
 
 use super::backend::{Backend, Frame, Output, OutputKind, StatusEntry, TopicProcessor};
+use super::clock::mono_ns;
 use super::slot::LatestSlot;
 use super::stats::{LatencyWindow, Level};
 use super::{topic_matches, NodeConfig, NodeError};
@@ -100,7 +101,7 @@ fn drain(s: &Arc<Stream>, pool: &Arc<rayon::ThreadPool>) {
             let mut result = lock(&s.processor).process(&frame);
             let outputs = std::mem::take(&mut result.outputs);
             let _ = s.outputs.send((frame.topic.clone(), outputs));
-            let now = now_ns();
+            let now = mono_ns();
             s.slot.touch(now);
             let mut c = lock(&s.counters);
             c.frames += 1;
@@ -273,7 +274,7 @@ pub fn run(
             spawner
                 .spawn_local(async move {
                     while let Some(bytes) = sub.next().await {
-                        let received_ns = now_ns();
+                        let received_ns = mono_ns();
                         let frame = Frame {
                             topic: t.clone(),
                             payload: bytes,
@@ -291,7 +292,7 @@ pub fn run(
                 .map_err(|e| NodeError::Ros(e.to_string()))?;
         }
         // Evict silent streams (their subscription task ends with the slot).
-        let now = now_ns();
+        let now = mono_ns();
         let mut map = lock(&streams);
         map.retain(|topic, s| {
             let silent = s.slot.received() > 0

@@ -27,6 +27,7 @@
 
 use super::backend::{Backend, Frame, ObjectReport, OutputKind, StatusEntry, TopicProcessor};
 use super::budget::ShareMeter;
+use super::clock::mono_ns;
 use super::reasons;
 use super::slot::LatestSlot;
 use super::stats::{LatencyWindow, Level};
@@ -97,7 +98,7 @@ struct StreamStats {
     /// When this stream last logged a failed frame (ns), and the failures
     /// left unlogged since: a hostile stream fails every frame, and the log
     /// says so once per [`WARN_EVERY_NS`], not 30 times a second.
-    last_warn_ns: i64,
+    last_warn_ns: Option<i64>,
     unlogged: u64,
     /// Output messages handed to zenoh. Each output carries the rmw_zenoh
     /// attachment's sequence number, so a subscriber counts what the
@@ -371,10 +372,13 @@ fn on_sample(shared: &Shared, r: Received, deadline: Duration) {
         }
         None => (None, None),
     };
+    // On the node's monotonic clock (`clock`), not the wall time zenoh's
+    // callback read: silence and latency must not jump with the wall clock.
+    let received_ns = mono_ns();
     let frame = Frame {
         topic: topic.clone(),
         payload: r.payload,
-        received_ns: r.received_ns,
+        received_ns,
         source_ns,
         sequence,
         deadline: Instant::now() + deadline,
@@ -384,7 +388,7 @@ fn on_sample(shared: &Shared, r: Received, deadline: Duration) {
     // since the epoch" and close the slot under the frame).
     let mut map = lock(&shared.streams);
     if let Some(s) = map.get(&topic) {
-        s.slot.put(frame, r.received_ns);
+        s.slot.put(frame, received_ns);
         return;
     }
     if map.len() >= shared.cfg.max_streams {
@@ -401,7 +405,7 @@ fn on_sample(shared: &Shared, r: Received, deadline: Duration) {
         shared.ignored.over_capacity.fetch_add(1, Ordering::Relaxed);
         return;
     }
-    s.slot.put(frame, r.received_ns);
+    s.slot.put(frame, received_ns);
     map.insert(topic, s);
 }
 
@@ -576,7 +580,9 @@ async fn compute(ctx: &StreamCtx, mut p: Box<dyn TopicProcessor>) -> Computed {
         let span = tracing::info_span!("frame", topic = %frame.topic, seq = ?frame.sequence);
         let _enter = span.enter();
         let start = Instant::now();
-        stream.computing_since_ns.store(now_ns(), Ordering::Release);
+        stream
+            .computing_since_ns
+            .store(mono_ns(), Ordering::Release);
         let result = p.process(&frame);
         stream.computing_since_ns.store(0, Ordering::Release);
         tracing::debug!(objects = result.objects.len(), error = ?result.error, "frame done");
@@ -616,7 +622,7 @@ async fn sit_out(ctx: &StreamCtx, debt: Duration) -> bool {
         () = tokio::time::sleep(debt) => true,
         () = wait_stop(ctx.stop.clone()) => false,
     };
-    ctx.stream.slot.touch(now_ns());
+    ctx.stream.slot.touch(mono_ns());
     ctx.stream.busy.store(false, Ordering::Release);
     let n = ctx.stream.slot.dropped().saturating_sub(dropped) + 1;
     *lock(&ctx.stream.stats)
@@ -659,7 +665,7 @@ async fn publish_outputs(
 
 /// Add one processed frame to the stream's statistics.
 fn record(ctx: &StreamCtx, taken: Taken, sent: Sent) {
-    let now = now_ns();
+    let now = mono_ns();
     ctx.stream.slot.touch(now);
     ctx.stream.busy.store(false, Ordering::Release);
     let late = Instant::now() > taken.deadline;
@@ -670,7 +676,8 @@ fn record(ctx: &StreamCtx, taken: Taken, sent: Sent) {
     st.received = ctx.stream.slot.received();
     st.latency.push((now - taken.received_ns) as f64 * 1e-9);
     if let Some(s) = taken.source_ns {
-        st.e2e.push((now - s) as f64 * 1e-9);
+        // The source stamp is the publisher's wall clock.
+        st.e2e.push((now_ns() - s) as f64 * 1e-9);
     }
     if late {
         st.late += 1;
@@ -684,10 +691,10 @@ fn record(ctx: &StreamCtx, taken: Taken, sent: Sent) {
     }
     st.last_failed = result.error.is_some();
     if let Some(e) = result.error {
-        if now - st.last_warn_ns >= WARN_EVERY_NS {
+        if st.last_warn_ns.is_none_or(|t| now - t >= WARN_EVERY_NS) {
             let also = std::mem::take(&mut st.unlogged);
             tracing::warn!(topic = %ctx.topic, error = %e, unlogged_since = also, "frame failed");
-            st.last_warn_ns = now;
+            st.last_warn_ns = Some(now);
         } else {
             st.unlogged += 1;
         }
@@ -718,7 +725,7 @@ async fn wait_stop(mut stop: watch::Receiver<bool>) {
 }
 
 fn evict(shared: &Shared, all: &mut BTreeMap<String, Arc<Mutex<StreamStats>>>) {
-    let now = now_ns();
+    let now = mono_ns();
     let after =
         i64::try_from(shared.cfg.evict_after_ms).unwrap_or(i64::MAX / 2_000_000) * 1_000_000;
     let mut map = lock(&shared.streams);
@@ -875,7 +882,7 @@ fn statuses(
     last: bool,
 ) -> Vec<StatusEntry> {
     let node = &shared.cfg.transport.node_name;
-    let now = now_ns();
+    let now = mono_ns();
     let mut out = Vec::new();
     let mut troubled = 0;
     for (topic, st) in all {
