@@ -2,7 +2,11 @@
 //! (paper Eq. 7 over K boundaries) on a 20,000-point cloud at a typical
 //! cuboid (~60 points gathered, K = 30; full profile and the membrane's
 //! best-boundary path), and the k-NN density (paper Eq. 5)
-//! of 20,000 points, both single-threaded.
+//! of 20,000 points, both single-threaded; and one warm frame of a healthy
+//! `bench-node` stream (20,000 points of a moving ellipsoid) through the
+//! node's processor with the default configuration, decode to encoded
+//! outputs, on one thread: the compute that decides how many 30 Hz streams
+//! two cores keep (issue 22's soak).
 #![allow(missing_docs, clippy::unwrap_used)]
 
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -113,5 +117,57 @@ fn bench_density(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_search, bench_density);
+fn bench_warm_frame(c: &mut Criterion) {
+    use sepmem::node::{Backend, Frame};
+    use sepmem::wire::msgs::{Header, Time};
+    let cfg = sepmem::config::Config::load(None, &[]).unwrap();
+    let backend = cfg.pipeline_backend().unwrap();
+    let topic = "/bench/s0/points";
+    let header = Header {
+        stamp: Time::from_nanos(1),
+        frame_id: "bench".into(),
+    };
+    let frames: Vec<Vec<u8>> = sepmem::bench::clouds::moving_ellipsoid(0, 20_000, 30)
+        .unwrap()
+        .iter()
+        .map(|c| {
+            let msg = sepmem::wire::pointcloud2::encode_pointcloud2(c, header.clone());
+            sepmem::wire::encode(&msg).unwrap()
+        })
+        .collect();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let mut processor = backend.processor(topic);
+    let budget = backend
+        .frame_deadline()
+        .unwrap_or(std::time::Duration::from_secs(1));
+    let mut k = 0usize;
+    let mut frame = || {
+        k += 1;
+        Frame {
+            topic: topic.into(),
+            payload: frames[k % frames.len()].clone(),
+            received_ns: k as i64,
+            source_ns: None,
+            sequence: None,
+            deadline: std::time::Instant::now() + budget,
+        }
+    };
+    // The cold first frame, then warm ones.
+    pool.install(|| processor.process(&frame()));
+    let mut g = c.benchmark_group("node");
+    g.sample_size(30);
+    g.bench_function("warm_frame_20k_single_thread", |b| {
+        b.iter_batched(
+            &mut frame,
+            |f| pool.install(|| black_box(processor.process(&f))),
+            criterion::BatchSize::SmallInput,
+        )
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench_search, bench_density, bench_warm_frame);
 criterion_main!(benches);

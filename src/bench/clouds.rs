@@ -214,6 +214,39 @@ pub fn coloured_with_dark_outliers(surface: &[Vec3], sigma: f64, rng: &mut impl 
     cloud
 }
 
+/// The clouds of one healthy stream of `sepmem bench-node` (and of the
+/// `warm_frame` criterion bench): `points` samples of an ellipsoid of size
+/// `0.1 + 0.05·index` m, moved along a 1 cm circle over `frames` frames,
+/// with a deterministic ±0.5 mm jitter (sensor-like noise).
+///
+/// # Errors
+/// [`super::BenchError`] when the shape or its surface samples cannot be made.
+pub fn moving_ellipsoid(
+    index: usize,
+    points: usize,
+    frames: usize,
+) -> Result<Vec<PointCloud>, super::BenchError> {
+    let shape = crate::shapes::ellipsoid(24)?;
+    let scale = 0.1 + 0.05 * index as f64;
+    let samples =
+        crate::metrics::sample_surface(&shape.mesh, points, 1 + index as u64).map_err(|e| {
+            super::BenchError::Metrics {
+                what: "bench-node stream".into(),
+                message: e.to_string(),
+            }
+        })?;
+    let cloud = |k: usize| {
+        let a = std::f64::consts::TAU * k as f64 / frames as f64;
+        let offset = Vec3::new(0.5 * index as f64 + 0.01 * a.cos(), 0.01 * a.sin(), 1.0);
+        let pts = samples.points.iter().enumerate().map(|(i, p)| {
+            let j = ((i * 7919 + k * 104_729) % 1000) as f64 / 1000.0 - 0.5;
+            p * scale + offset + Vec3::repeat(j * 1e-3)
+        });
+        PointCloud::from_points(pts.collect())
+    };
+    Ok((0..frames).map(cloud).collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

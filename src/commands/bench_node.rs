@@ -18,9 +18,8 @@ use super::soak;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use hdrhistogram::Histogram;
-use sepmem::cloud::{PointCloud, Vec3};
+use sepmem::cloud::PointCloud;
 use sepmem::config::Config;
-use sepmem::metrics::sample_surface;
 use sepmem::node::loopback::LoopbackNode;
 use sepmem::node::runtime::NodeSummary;
 use sepmem::node::Backend;
@@ -97,36 +96,16 @@ fn heap_mib() -> Option<(f64, f64)> {
     None
 }
 
-/// Pre-encoded frames of one stream: the ellipsoid moved along a small
-/// circle; the stamp is patched at publish time.
+/// Pre-encoded frames of one stream ([`sepmem::bench::clouds::moving_ellipsoid`]);
+/// the stamp is patched at publish time.
 fn stream_frames(index: usize, points: usize, frames: usize) -> Result<Vec<Vec<u8>>> {
-    let shape = sepmem::shapes::ellipsoid(24)?;
-    let scale = 0.1 + 0.05 * index as f64;
-    let samples = sample_surface(&shape.mesh, points, 1 + index as u64)?;
-    let mut out = Vec::with_capacity(frames);
-    for k in 0..frames {
-        let a = std::f64::consts::TAU * k as f64 / frames as f64;
-        let offset = Vec3::new(0.5 * index as f64 + 0.01 * a.cos(), 0.01 * a.sin(), 1.0);
-        let pts: Vec<Vec3> = samples
-            .points
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                // Deterministic ±0.5 mm jitter (sensor-like noise).
-                let j = ((i * 7919 + k * 104_729) % 1000) as f64 / 1000.0 - 0.5;
-                p * scale + offset + Vec3::repeat(j * 1e-3)
-            })
-            .collect();
-        let msg = encode_pointcloud2(
-            &PointCloud::from_points(pts),
-            Header {
-                stamp: Time::from_nanos(0),
-                frame_id: "bench".into(),
-            },
-        );
-        out.push(wire::encode(&msg)?);
-    }
-    Ok(out)
+    let header = Header {
+        stamp: Time::from_nanos(0),
+        frame_id: "bench".into(),
+    };
+    let encode = |c: &PointCloud| wire::encode(&encode_pointcloud2(c, header.clone()));
+    let clouds = sepmem::bench::clouds::moving_ellipsoid(index, points, frames)?;
+    Ok(clouds.iter().map(encode).collect::<Result<_, _>>()?)
 }
 
 /// The stamp of a CDR message whose first field is a `std_msgs/Header`.

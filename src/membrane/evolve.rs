@@ -218,7 +218,7 @@ fn move_and_refit(
     );
     times.search_ms += ms(t_reg);
     let t_fit = Instant::now();
-    // The orientation sign is fixed once (init, warm start, regrid): a
+    // The orientation sign is fixed once (init, regrid; a warm start keeps its own): a
     // refit moves the samples by small shifts and cannot turn the surface
     // inside out.
     fit.fit(surface, &b.targets)?;
