@@ -9,6 +9,7 @@
 //! poles first/last), so it is factored once per layout with a banded
 //! Cholesky and each iteration only back-substitutes three right-hand sides.
 
+use super::basis::{clamped, periodic};
 use super::surface::{ClosedSurface, Layout};
 use super::SplineError;
 use crate::cloud::Vec3;
@@ -293,19 +294,26 @@ pub fn param_stretch(
     cum: &mut Vec<f64>,
 ) -> f64 {
     let (lines, n) = (lines.max(1), n.max(2));
-    let at = |line: usize, t: f64| {
-        if along_u {
-            surface.eval(t, (line as f64 + 0.5) / lines as f64).p
-        } else {
-            surface.eval(line as f64 / lines as f64, t).p
-        }
-    };
+    let (m, l) = (surface.m(), surface.l());
     cum.clear();
     cum.resize(n + 1, 0.0);
     for line in 0..lines {
-        let mut prev = at(line, 0.0);
+        // The line's basis once (the clamped one is the costly half).
+        let fixed = if along_u {
+            clamped((line as f64 + 0.5) / lines as f64, l)
+        } else {
+            periodic(line as f64 / lines as f64, m)
+        };
+        let at = |t: f64| {
+            if along_u {
+                surface.eval_span(&periodic(t, m), &fixed).p
+            } else {
+                surface.eval_span(&fixed, &clamped(t, l)).p
+            }
+        };
+        let mut prev = at(0.0);
         for (k, c) in cum.iter_mut().enumerate().skip(1) {
-            let p = at(line, k as f64 / n as f64);
+            let p = at(k as f64 / n as f64);
             *c += (p - prev).norm();
             prev = p;
         }

@@ -210,7 +210,7 @@ impl ClosedSurface {
     }
 
     #[inline]
-    fn eval_span(&self, bu: &Span4, bv: &Span4) -> SurfacePoint {
+    pub(crate) fn eval_span(&self, bu: &Span4, bv: &Span4) -> SurfacePoint {
         let mut p = Vec3::zeros();
         let mut su = Vec3::zeros();
         let mut sv = Vec3::zeros();
