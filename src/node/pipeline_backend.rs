@@ -115,15 +115,23 @@ impl FrameOut {
 impl EngineProcessor {
     /// The outputs of one evolved object: the mesh and marker the engine
     /// chose to show ([`crate::pipeline::objects`]), its frame diagnostics
-    /// and its `/diagnostics` report.
-    fn emit(&self, r: &PipelineResult, shown: &Shown, sample: &DecodedSample, out: &mut FrameOut) {
+    /// and its `/diagnostics` report. The marker, a TRIANGLE_LIST of the
+    /// whole mesh, moves into the frame's MarkerArray instead of being
+    /// copied (marker copies were 0.7 % of a warm frame's profile).
+    fn emit(
+        &self,
+        r: &PipelineResult,
+        shown: &mut Shown,
+        sample: &DecodedSample,
+        out: &mut FrameOut,
+    ) {
         let rep = &r.reconstruction.report;
         out.encode(OutputKind::Mesh, &shown.mesh);
         out.encode(
             OutputKind::FrameDiagnostics,
             &outputs::frame_diagnostics(r, &sample.header, sample.points_in, sample.dropped),
         );
-        out.markers.push(shown.marker.clone());
+        out.markers.push(std::mem::take(&mut shown.marker));
         let fitted = shown.verdict.is_fitted();
         if !fitted {
             reasons::bump(&mut out.counts, reasons::UNFITTED, 1);
@@ -180,7 +188,7 @@ impl EngineProcessor {
     }
 
     /// The counts and outputs of a processed frame.
-    fn outputs(&mut self, frame: &EngineFrame) -> FrameOut {
+    fn outputs(&mut self, frame: &mut EngineFrame) -> FrameOut {
         let mut out = FrameOut::default();
         reasons::bump(
             &mut out.counts,
@@ -189,8 +197,8 @@ impl EngineProcessor {
         );
         let reid = frame.reidentified.len() as u64;
         reasons::bump(&mut out.counts, reasons::LABELS_REIDENTIFIED, reid);
-        for p in &frame.processed {
-            match (&p.outcome, &p.shown) {
+        for p in &mut frame.processed {
+            match (&p.outcome, &mut p.shown) {
                 (Ok(r), Some(shown)) => self.emit(r, shown, &frame.sample, &mut out),
                 (Ok(_), None) => {}
                 (Err(e), _) => {
@@ -226,7 +234,7 @@ impl TopicProcessor for EngineProcessor {
             Some(deadlines),
             frame.received_ns,
         );
-        let done = match handled {
+        let mut done = match handled {
             Ok(done) => done,
             Err(e) => {
                 let mut counts = Vec::new();
@@ -239,7 +247,7 @@ impl TopicProcessor for EngineProcessor {
             }
         };
         self.last_header = done.sample.header.clone();
-        let out = self.outputs(&done);
+        let out = self.outputs(&mut done);
         FrameResult {
             outputs: out.outputs,
             objects: out.objects,
