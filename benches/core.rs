@@ -118,9 +118,28 @@ fn bench_density(c: &mut Criterion) {
 }
 
 fn bench_warm_frame(c: &mut Criterion) {
+    let mut g = c.benchmark_group("node");
+    g.sample_size(30);
+    // The node's defaults: the deadline decides how many iterations run.
+    warm_frames(&mut g, "warm_frame_20k_single_thread", &[]);
+    // The same work every frame (one iteration, no deadline): the figure to
+    // compare when a change must not alter the work done.
+    let fixed = ["pipeline.deadline_ms=0", "pipeline.warm_max_iterations=1"];
+    warm_frames(&mut g, "warm_frame_20k_one_iteration", &fixed);
+    g.finish();
+}
+
+/// One warm `bench-node` frame (20 k points, a moving ellipsoid) through the
+/// node's processor on one thread, from decode to encoded outputs.
+fn warm_frames(
+    g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    name: &str,
+    sets: &[&str],
+) {
     use sepmem::node::{Backend, Frame};
     use sepmem::wire::msgs::{Header, Time};
-    let cfg = sepmem::config::Config::load(None, &[]).unwrap();
+    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    let cfg = sepmem::config::Config::load(None, &sets).unwrap();
     let backend = cfg.pipeline_backend().unwrap();
     let topic = "/bench/s0/points";
     let header = Header {
@@ -157,16 +176,13 @@ fn bench_warm_frame(c: &mut Criterion) {
     };
     // The cold first frame, then warm ones.
     pool.install(|| processor.process(&frame()));
-    let mut g = c.benchmark_group("node");
-    g.sample_size(30);
-    g.bench_function("warm_frame_20k_single_thread", |b| {
+    g.bench_function(name, |b| {
         b.iter_batched(
             &mut frame,
             |f| pool.install(|| black_box(processor.process(&f))),
             criterion::BatchSize::SmallInput,
         )
     });
-    g.finish();
 }
 
 criterion_group!(benches, bench_search, bench_density, bench_warm_frame);

@@ -186,19 +186,27 @@ impl ViewBuffer {
 
     /// Fraction of occupied bins (with at least two points) holding two
     /// depth layers separated by more than `gap`.
+    ///
+    /// The ranges are positive (a [`ViewBuffer`] is only made of points in
+    /// front of the eye), so their bit patterns sort as their values: the
+    /// integer sort is half the cost of comparing with `total_cmp`.
     fn two_layer_fraction(&self, points: &[Vec3], gap: f64) -> f64 {
-        let mut keyed: Vec<(usize, f64)> = points
+        let mut keyed: Vec<(usize, u64)> = points
             .iter()
-            .filter_map(|p| self.image.cell(p).map(|c| (c, self.frame().range(p))))
+            .filter_map(|p| {
+                let r = self.frame().range(p);
+                (r > 0.0).then(|| self.image.cell(p).map(|c| (c, r.to_bits())))?
+            })
             .collect();
-        keyed.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+        keyed.sort_unstable();
+        let range = |k: usize| f64::from_bits(keyed[k].1);
         let (mut bins, mut layered) = (0usize, 0usize);
         let mut i = 0;
         while i < keyed.len() {
             let mut j = i + 1;
             let mut split = false;
             while j < keyed.len() && keyed[j].0 == keyed[i].0 {
-                split |= keyed[j].1 - keyed[j - 1].1 > gap;
+                split |= range(j) - range(j - 1) > gap;
                 j += 1;
             }
             if j - i >= 2 {
