@@ -31,23 +31,42 @@ pub fn thin_indices(n: usize, cap: usize, salt: u64) -> Vec<usize> {
     if cap == 0 || n <= cap {
         return (0..n).collect();
     }
+    let key = thin_key(salt);
+    // The keys are uniform on u64 and distinct (SplitMix64 is a bijection),
+    // so the `cap` smallest lie below about cap/n of the range: select among
+    // the keys below a bound six standard deviations above that, and among
+    // all of them only when the bound caught too few. One pass over the
+    // points instead of a selection among all n keys.
+    let share = cap as f64 / n as f64;
+    let spread = 6.0 * (n as f64 * share * (1.0 - share)).sqrt() + 16.0;
+    let bound_share = (cap as f64 + spread) / n as f64;
+    let bound = if bound_share >= 1.0 {
+        u64::MAX
+    } else {
+        (bound_share * 2f64.powi(64)) as u64
+    };
+    let mut keyed: Vec<(u64, usize)> = (0..n)
+        .map(|i| (key(i), i))
+        .filter(|&(k, _)| k <= bound)
+        .collect();
+    if keyed.len() < cap {
+        keyed = (0..n).map(|i| (key(i), i)).collect();
+    }
+    keyed.select_nth_unstable(cap - 1);
+    let mut out: Vec<usize> = keyed[..cap].iter().map(|&(_, i)| i).collect();
+    out.sort_unstable();
+    out
+}
+
+/// The SplitMix64 key of index `i` under `salt` ([`thin_indices`]).
+fn thin_key(salt: u64) -> impl Fn(usize) -> u64 {
     let mix = salt.wrapping_mul(0xD1B5_4A32_D192_ED03);
-    let key = |i: usize| -> u64 {
+    move |i: usize| -> u64 {
         let mut z = (i as u64 ^ mix).wrapping_add(0x9E37_79B9_7F4A_7C15);
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
         z ^ (z >> 31)
-    };
-    let mut keys: Vec<u64> = (0..n).map(key).collect();
-    let (_, kth, _) = keys.select_nth_unstable(cap - 1);
-    let limit = *kth;
-    let mut out = Vec::with_capacity(cap);
-    for i in 0..n {
-        if key(i) <= limit && out.len() < cap {
-            out.push(i);
-        }
     }
-    out
 }
 
 /// 3-vector of `f64` used for every position and direction in sepmem.
@@ -433,6 +452,42 @@ impl PointCloud {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The `cap` indices with the smallest keys, by sorting all of them.
+    fn thin_reference(n: usize, cap: usize, salt: u64) -> Vec<usize> {
+        if cap == 0 || n <= cap {
+            return (0..n).collect();
+        }
+        let key = thin_key(salt);
+        let mut all: Vec<(u64, usize)> = (0..n).map(|i| (key(i), i)).collect();
+        all.sort_unstable();
+        let mut out: Vec<usize> = all[..cap].iter().map(|&(_, i)| i).collect();
+        out.sort_unstable();
+        out
+    }
+
+    #[test]
+    fn thinning_keeps_the_cap_smallest_keys() {
+        for (n, cap) in [
+            (20_000, 2_500),
+            (10, 9),
+            (1000, 1),
+            (5000, 4999),
+            (3, 0),
+            (7, 7),
+            (64, 32),
+        ] {
+            for salt in [0, 1, 0xDEAD_BEEF] {
+                let got = thin_indices(n, cap, salt);
+                assert_eq!(
+                    got,
+                    thin_reference(n, cap, salt),
+                    "n {n} cap {cap} salt {salt}"
+                );
+                assert_eq!(got.len(), if cap == 0 { n } else { cap.min(n) });
+            }
+        }
+    }
 
     #[test]
     fn distance_to_a_box_is_zero_inside_and_euclidean_outside() {

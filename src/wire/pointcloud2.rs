@@ -186,7 +186,7 @@ fn read_bytes<const N: usize>(p: &[u8], off: usize) -> [u8; N] {
     a
 }
 
-#[inline]
+#[inline(always)]
 fn read_f64(p: &[u8], off: usize, dt: u8, be: bool) -> f64 {
     macro_rules! rd {
         ($t:ty, $n:literal) => {{
