@@ -195,7 +195,8 @@ impl ViewBuffer {
             .iter()
             .filter_map(|p| {
                 let r = self.frame().range(p);
-                (r > 0.0).then(|| self.image.cell(p).map(|c| (c, r.to_bits())))?
+                let c = self.image.cell(p).filter(|_| r > 0.0)?;
+                Some((c, r.to_bits()))
             })
             .collect();
         keyed.sort_unstable();
