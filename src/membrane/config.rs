@@ -422,6 +422,10 @@ pub struct GrowthConfig {
     pub g_min: f64,
     /// Minimum iterations on a grid before it may grow again.
     pub grow_after: usize,
+    /// Most control points per point the membrane uses: the grid grows only
+    /// to sizes with at most this many (`None`: up to `grid_max` whatever
+    /// the points). See [`super::schedule`] for the measurement.
+    pub max_control_per_point: Option<f64>,
 }
 
 impl Default for GrowthConfig {
@@ -431,6 +435,7 @@ impl Default for GrowthConfig {
             grid_step: [8, 5],
             g_min: 0.01,
             grow_after: 2,
+            max_control_per_point: Some(2.0),
         }
     }
 }
@@ -707,6 +712,11 @@ fn validate_growth(g: &GrowthConfig, grid: [usize; 2]) -> Result<(), ConfigError
         non_negative(g.g_min),
         "schedule.growth.g_min",
         "must be a finite value >= 0",
+    )?;
+    check(
+        g.max_control_per_point.is_none_or(pos),
+        "schedule.growth.max_control_per_point",
+        "must be positive (null: no bound)",
     )
 }
 

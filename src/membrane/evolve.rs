@@ -104,7 +104,8 @@ pub(crate) fn evolve(
     } else {
         sc.depth_start
     } * prep.scale;
-    let mut schedule = Schedule::new(sc, budget, depth, floor, [surface.m(), surface.l()]);
+    let grid = [surface.m(), surface.l()];
+    let mut schedule = Schedule::new(sc, budget, depth, floor, grid, prep.points.len());
     let chunks = 4 * rayon::current_num_threads().max(1);
     let mut b = Buffers {
         scratches: (0..chunks).map(|_| ThreadScratch::default()).collect(),

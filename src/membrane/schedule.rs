@@ -13,6 +13,27 @@
 //! [`Schedule::budget_stop`] checks the caps and predicts whether another
 //! iteration still ends before the deadline.
 //!
+//! Growth stops at the grid with at most `growth.max_control_per_point`
+//! control points per point the membrane uses ([`largest_grid`]): a
+//! 50-point segment (a label bomb's, or a far object's) otherwise grew to
+//! 40×25 (1,000 control points) and cost as much per iteration as a
+//! 20,000-point object. Cold starts of the seven procedural shapes × 3
+//! samplings (`cargo bench --bench small_clouds`, F at
+//! τ = 0.01 / 0.02 against the mesh, median time), unbounded → bound 2:
+//!
+//! | points | F τ=0.01 | F τ=0.02 | median ms |
+//! |---|---|---|---|
+//! | 50 | 0.027 → 0.012 | 0.063 → 0.026 | 937 → 102 |
+//! | 150 | 0.116 → 0.121 | 0.315 → 0.311 | 753 → 136 |
+//! | 250 | 0.218 → 0.207 | 0.513 → 0.504 | 595 → 222 |
+//! | 450 | 0.384 → 0.376 | 0.724 → 0.724 | 577 → 279 |
+//! | 700 and more | unchanged (the bound reaches 40×25) | | |
+//!
+//! From 150 points on, F moves by at most 0.011 while a cold start
+//! takes a half to a fifth of the time, within the node's 200 ms cold
+//! budget where it used to run out of it; at 50 points every grid scores
+//! below 0.07.
+//!
 //! The depth shrinks by `depth_decay` per iteration, but not below a floor
 //! of `depth_floor_delta`·δ, nor below what the membrane still travels
 //! (2.5× the 90th percentile of the moving samples' shifts): a fixed decay
@@ -57,18 +78,20 @@ pub struct Schedule<'a> {
 
 impl<'a> Schedule<'a> {
     /// A schedule starting at `depth` (in input units, floored at `floor`)
-    /// on `grid`, which may grow to `growth.grid_max` when `growth` is on.
+    /// on `grid`, which may grow ([`largest_grid`]) when `growth` is on;
+    /// `points` is the number of points the membrane uses.
     pub fn new(
         cfg: &'a ScheduleConfig,
         budget: &'a Budget,
         depth: f64,
         floor: f64,
         grid: [usize; 2],
+        points: usize,
     ) -> Self {
-        let max_grid = match &cfg.growth {
-            Some(g) => [g.grid_max[0].max(grid[0]), g.grid_max[1].max(grid[1])],
-            None => grid,
-        };
+        let max_grid = cfg
+            .growth
+            .as_ref()
+            .map_or(grid, |g| largest_grid(g, grid, points));
         Self {
             cfg,
             budget,
@@ -201,5 +224,47 @@ impl<'a> Schedule<'a> {
         let k = (self.moving.len() * 9 / 10).min(self.moving.len() - 1);
         let (_, q, _) = self.moving.select_nth_unstable_by(k, f64::total_cmp);
         2.5 * *q
+    }
+}
+
+/// The largest grid that growth reaches from `start`: steps of
+/// `grid_step` up to `grid_max`, and no step to a grid with more than
+/// `max_control_per_point` control points per point of `points`.
+pub fn largest_grid(g: &GrowthConfig, start: [usize; 2], points: usize) -> [usize; 2] {
+    let cap = [g.grid_max[0].max(start[0]), g.grid_max[1].max(start[1])];
+    let allowed = g
+        .max_control_per_point
+        .map_or(f64::INFINITY, |k| k * points as f64);
+    let mut grid = start;
+    loop {
+        let next = [
+            (grid[0] + g.grid_step[0]).min(cap[0]),
+            (grid[1] + g.grid_step[1]).min(cap[1]),
+        ];
+        if next == grid || (next[0] * next[1]) as f64 > allowed {
+            return grid;
+        }
+        grid = next;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn growth_stops_at_the_points_bound() {
+        let mut g = GrowthConfig::default();
+        // 2 control points per point, steps of [8, 5] from 8x5.
+        assert_eq!(largest_grid(&g, [8, 5], 50), [8, 5]);
+        assert_eq!(largest_grid(&g, [8, 5], 80), [16, 10]);
+        assert_eq!(largest_grid(&g, [8, 5], 180), [24, 15]);
+        assert_eq!(largest_grid(&g, [8, 5], 499), [32, 20]);
+        assert_eq!(largest_grid(&g, [8, 5], 500), [40, 25]);
+        assert_eq!(largest_grid(&g, [8, 5], 1_000_000), [40, 25]);
+        // A warm start on a larger grid keeps it.
+        assert_eq!(largest_grid(&g, [48, 30], 10), [48, 30]);
+        g.max_control_per_point = None;
+        assert_eq!(largest_grid(&g, [8, 5], 1), [40, 25]);
     }
 }
