@@ -268,7 +268,8 @@ fn channel_layout(msg: &PointCloud2) -> Result<(Vec<String>, Vec<Reader>), Point
         return Err(PointCloud2Error::TooManyExpanded { channels: multi });
     }
     // Insertion-ordered set of the channel names: each name is formatted
-    // once and moved in (no clone), and a duplicate is dropped.
+    // into one reused buffer and copied in only when it is new (the first
+    // field claiming a name wins).
     let capacity = expanded as usize + 3;
     let mut names: IndexSet<String, ahash::RandomState> =
         IndexSet::with_capacity_and_hasher(capacity, ahash::RandomState::new());
