@@ -51,7 +51,8 @@ pub const THRESHOLD: f64 = 0.003;
 
 /// The optional mechanisms and the `--set` override that switches each.
 /// Pure cost bounds (`prepare.max_points`, `schedule.time_limit_ms`,
-/// iteration caps) are not mechanisms and are not switched.
+/// `schedule.growth.max_control_per_point`, iteration caps) are not
+/// mechanisms and are not switched.
 pub const MECHANISMS: [&str; 17] = [
     "membrane.prepare.outlier_factor=null",
     // Off by default (global δ): switched on.
