@@ -194,9 +194,9 @@ impl ViewBuffer {
         let mut keyed: Vec<(usize, u64)> = points
             .iter()
             .filter_map(|p| {
+                let c = self.image.cell(p)?;
                 let r = self.frame().range(p);
-                let c = self.image.cell(p).filter(|_| r > 0.0)?;
-                Some((c, r.to_bits()))
+                (r > 0.0).then_some((c, r.to_bits()))
             })
             .collect();
         keyed.sort_unstable();
