@@ -249,11 +249,11 @@ fn warm_frames<M: Measurement>(g: &mut BenchmarkGroup<'_, M>, name: &str, sets: 
         }
     };
     // The cold first frame, then warm ones.
-    pool.install(|| processor.process(&frame()));
+    pool.install(|| processor.process(&frame(), &mut |o| drop(black_box(o))));
     g.bench_function(name, |b| {
         b.iter_batched(
             &mut frame,
-            |f| pool.install(|| black_box(processor.process(&f))),
+            |f| pool.install(|| black_box(processor.process(&f, &mut |o| drop(black_box(o))))),
             criterion::BatchSize::SmallInput,
         )
     });

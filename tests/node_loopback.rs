@@ -9,8 +9,8 @@ use sepmem::config::Config;
 use sepmem::node::clock::mono_ns;
 use sepmem::node::runtime::{run, NodeSummary};
 use sepmem::node::{
-    Backend, Frame, FrameResult, Level, NodeConfig, ObjectReport, Output, OutputKind, Shard,
-    StatusEntry, TopicProcessor,
+    Backend, Frame, FrameResult, Level, NodeConfig, ObjectReport, Output, OutputKind, OutputSink,
+    Shard, StatusEntry, TopicProcessor,
 };
 use sepmem::transport::liveliness::{EntityKind, Qos, Token};
 use sepmem::transport::{free_loopback_port, Participant, Received, RosType, TransportConfig};
@@ -29,10 +29,13 @@ struct TestProc {
     topic: String,
     seen: Arc<Mutex<Vec<(String, u64)>>>,
     receipts: Arc<Mutex<Vec<i64>>>,
+    /// When set: after the mesh, the frame's later output (a diagnostics
+    /// message with the same bytes) takes this long to make.
+    tail: Option<Duration>,
 }
 
 impl TopicProcessor for TestProc {
-    fn process(&mut self, frame: &Frame) -> FrameResult {
+    fn process(&mut self, frame: &Frame, sink: &mut OutputSink<'_>) -> FrameResult {
         if frame.payload.len() != 16 || frame.payload[..4] != [0, 1, 0, 0] {
             return FrameResult {
                 error: Some(format!("malformed sample of {} bytes", frame.payload.len())),
@@ -47,11 +50,18 @@ impl TopicProcessor for TestProc {
         let mut out = vec![0, 1, 0, 0];
         out.extend_from_slice(&index.to_le_bytes());
         out.extend_from_slice(self.topic.as_bytes());
-        FrameResult {
-            outputs: vec![Output {
-                kind: OutputKind::Mesh,
+        sink(Output {
+            kind: OutputKind::Mesh,
+            payload: out.clone(),
+        });
+        if let Some(tail) = self.tail {
+            std::thread::sleep(tail);
+            sink(Output {
+                kind: OutputKind::FrameDiagnostics,
                 payload: out,
-            }],
+            });
+        }
+        FrameResult {
             objects: vec![ObjectReport {
                 stream: self.topic.clone(),
                 eta_g: 0.9,
@@ -77,6 +87,7 @@ impl TopicProcessor for TestProc {
 struct TestBackend {
     seen: Arc<Mutex<Vec<(String, u64)>>>,
     receipts: Arc<Mutex<Vec<i64>>>,
+    tail: Option<Duration>,
 }
 
 impl Backend for TestBackend {
@@ -109,6 +120,7 @@ impl Backend for TestBackend {
             topic: topic.to_string(),
             seen: self.seen.clone(),
             receipts: self.receipts.clone(),
+            tail: self.tail,
         })
     }
     fn encode_diagnostics(&self, _stamp: i64, _frame: &str, status: &[StatusEntry]) -> Vec<u8> {
@@ -546,6 +558,59 @@ async fn liveliness(h: &Participant) -> Vec<Token> {
 /// `clock::mono_ns` around the frame, not on the wall clock, which a robot's
 /// chrony may step by hours (a forward step would evict every stream and
 /// forget every label at once, a backward one keep silent ones for hours).
+/// The frame index of a [`TestProc`] output.
+fn index_of(r: &Received) -> u64 {
+    u64::from_le_bytes(r.payload[4..12].try_into().unwrap())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_mesh_leaves_before_the_frames_later_outputs_are_made() {
+    let (h, cfg) = harness("early").await;
+    let tail = Duration::from_millis(400);
+    let backend = Arc::new(TestBackend {
+        tail: Some(tail),
+        ..TestBackend::default()
+    });
+    let (stop_tx, node) = spawn_node(cfg, backend);
+    let (_msub, meshes) = collect(&h, "/early/**", &any_type("sepmem_msgs/msg/SurfaceMesh")).await;
+    let (_dsub, diags) = collect(
+        &h,
+        "/early/**",
+        &any_type("sepmem_msgs/msg/FrameDiagnostics"),
+    )
+    .await;
+    let points = h
+        .publisher("/early/points", &pc2(), Qos::SENSOR_DATA)
+        .await
+        .unwrap();
+    let mut k = 0;
+    probe(
+        &points,
+        || diags.lock().unwrap().len() >= 3,
+        || {
+            k += 1;
+            payload(k, 0)
+        },
+    )
+    .await;
+    // Every frame's mesh arrived at least most of the tail before the
+    // frame's diagnostics: it was published before they were made.
+    let meshes = meshes.lock().unwrap().clone();
+    let diags = diags.lock().unwrap().clone();
+    for d in &diags {
+        let i = index_of(d);
+        let m = meshes.iter().find(|m| index_of(m) == i);
+        let m = m.unwrap_or_else(|| panic!("frame {i}: diagnostics without its mesh"));
+        let ahead = Duration::from_nanos((d.received_ns - m.received_ns).max(0) as u64);
+        assert!(
+            ahead >= tail * 3 / 4,
+            "frame {i}: the mesh arrived only {ahead:?} before the diagnostics (tail {tail:?})"
+        );
+    }
+    let summary = stop(stop_tx, node).await;
+    assert!(summary.clean_shutdown);
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn receipt_times_are_on_the_monotonic_clock() {
     let (h, cfg) = harness("mono").await;

@@ -28,7 +28,8 @@ pub mod slot;
 pub mod stats;
 
 pub use backend::{
-    Backend, Frame, FrameResult, ObjectReport, Output, OutputKind, StatusEntry, TopicProcessor,
+    Backend, Frame, FrameResult, ObjectReport, Output, OutputKind, OutputSink, StatusEntry,
+    TopicProcessor,
 };
 pub use pipeline_backend::PipelineBackend;
 pub use shard::Shard;

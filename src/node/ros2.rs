@@ -98,9 +98,10 @@ fn drain(s: &Arc<Stream>, pool: &Arc<rayon::ThreadPool>) {
         while let Some(frame) = s.slot.take() {
             let span = tracing::info_span!("frame", topic = %frame.topic, seq = ?frame.sequence);
             let _enter = span.enter();
-            let mut result = lock(&s.processor).process(&frame);
-            let outputs = std::mem::take(&mut result.outputs);
-            let _ = s.outputs.send((frame.topic.clone(), outputs));
+            // Each output goes to the spinning thread as soon as it is made.
+            let result = lock(&s.processor).process(&frame, &mut |out| {
+                let _ = s.outputs.send((frame.topic.clone(), vec![out]));
+            });
             let now = mono_ns();
             s.slot.touch(now);
             let mut c = lock(&s.counters);

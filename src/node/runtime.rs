@@ -5,9 +5,11 @@
 //!   topic's [`LatestSlot`] (creating the slot, and asking the manager for a
 //!   stream task, for a new topic).
 //! * One tokio task per stream waits on its slot, hands the newest frame and
-//!   the stream's [`TopicProcessor`] to the rayon pool, awaits the result on
-//!   a oneshot channel (tokio workers never block), and publishes the
-//!   outputs. Streams therefore compute in parallel, up to the pool size.
+//!   the stream's [`TopicProcessor`] to the rayon pool, publishes each
+//!   output as the processor hands it over (an object's mesh leaves before
+//!   the frame's later outputs are made), and awaits the result on a
+//!   oneshot channel (tokio workers never block). Streams therefore compute
+//!   in parallel, up to the pool size.
 //! * The manager task spawns stream tasks, publishes `/diagnostics` every
 //!   `diagnostics_period_ms`, and evicts streams silent for
 //!   `evict_after_ms` (their state is freed and they are reported STALE).
@@ -25,7 +27,9 @@
 //!   published, and all liveliness tokens are undeclared before the session
 //!   closes.
 
-use super::backend::{Backend, Frame, ObjectReport, OutputKind, StatusEntry, TopicProcessor};
+use super::backend::{
+    Backend, Frame, ObjectReport, Output, OutputKind, StatusEntry, TopicProcessor,
+};
 use super::budget::ShareMeter;
 use super::clock::mono_ns;
 use super::reasons;
@@ -440,8 +444,8 @@ enum Computed {
     Abandoned,
     /// The slot was empty when the job ran.
     Empty(Box<dyn TopicProcessor>),
-    /// The frame was processed.
-    Done(Box<dyn TopicProcessor>, Taken),
+    /// The frame was processed, and its outputs published.
+    Done(Box<dyn TopicProcessor>, Taken, Sent),
 }
 
 type Publishers = BTreeMap<OutputKind, RosPublisher>;
@@ -465,20 +469,18 @@ async fn stream_task(mut ctx: StreamCtx) -> bool {
                 continue;
             }
             let Some(p) = processor.take() else { break };
-            match compute(&ctx, p).await {
+            match compute(&ctx, &pubs, p).await {
                 Computed::Abandoned => {
                     tracing::warn!(topic = %ctx.topic, "in-flight frame abandoned at shutdown");
                     clean = false;
                     break;
                 }
                 Computed::Empty(p) => processor = Some(p),
-                Computed::Done(p, mut taken) => {
+                Computed::Done(p, taken, sent) => {
                     processor = Some(p);
                     if let Some(m) = meter.as_mut() {
                         m.charge(taken.busy, Instant::now());
                     }
-                    let outputs = std::mem::take(&mut taken.result.outputs);
-                    let sent = publish_outputs(&pubs, &ctx.topic, outputs).await;
                     record(&ctx, taken, sent);
                 }
             }
@@ -562,11 +564,16 @@ async fn declare_stream(ctx: &StreamCtx) -> (Option<EntityToken>, Publishers) {
     (token, pubs)
 }
 
-/// Hand the stream's newest frame and its processor to the compute pool and
-/// wait for the result (tokio workers never block).
-async fn compute(ctx: &StreamCtx, mut p: Box<dyn TopicProcessor>) -> Computed {
+/// Hand the stream's newest frame and its processor to the compute pool,
+/// publish each output as the processor hands it over, and wait for the
+/// result (tokio workers never block).
+async fn compute(ctx: &StreamCtx, pubs: &Publishers, mut p: Box<dyn TopicProcessor>) -> Computed {
     ctx.stream.busy.store(true, Ordering::Release);
     let (tx, mut rx) = oneshot::channel::<Done>();
+    // Unbounded, but it holds at most one frame's outputs: a mesh and a
+    // diagnostics message per object (at most pipeline.objects.max_per_frame)
+    // and a few per frame.
+    let (out_tx, mut out_rx) = mpsc::unbounded_channel::<Output>();
     // Late binding: the job takes the newest frame when a compute thread is
     // free, so a frame never ages in the pool's queue while a newer one
     // waits in the slot (that older one is then counted as dropped, and the
@@ -583,7 +590,9 @@ async fn compute(ctx: &StreamCtx, mut p: Box<dyn TopicProcessor>) -> Computed {
         stream
             .computing_since_ns
             .store(mono_ns(), Ordering::Release);
-        let result = p.process(&frame);
+        let result = p.process(&frame, &mut |out| {
+            let _ = out_tx.send(out);
+        });
         stream.computing_since_ns.store(0, Ordering::Release);
         tracing::debug!(objects = result.objects.len(), error = ?result.error, "frame done");
         let taken = Taken {
@@ -596,17 +605,27 @@ async fn compute(ctx: &StreamCtx, mut p: Box<dyn TopicProcessor>) -> Computed {
         let _ = tx.send((p, Some(taken)));
     });
     let shutdown_bound = Duration::from_millis(ctx.cfg.shutdown_timeout_ms);
-    let done = tokio::select! {
-        r = &mut rx => r.ok(),
-        () = wait_stop(ctx.stop.clone()) => tokio::time::timeout(shutdown_bound, &mut rx).await.ok().and_then(Result::ok),
+    let mut sent = Sent::default();
+    let stop = wait_stop(ctx.stop.clone());
+    tokio::pin!(stop);
+    let done = loop {
+        tokio::select! {
+            Some(out) = out_rx.recv() => sent.add(publish_output(pubs, &ctx.topic, out).await),
+            r = &mut rx => break r.ok(),
+            () = &mut stop => break tokio::time::timeout(shutdown_bound, &mut rx).await.ok().and_then(Result::ok),
+        }
     };
+    // The outputs handed over just before the result came.
+    while let Ok(out) = out_rx.try_recv() {
+        sent.add(publish_output(pubs, &ctx.topic, out).await);
+    }
     match done {
         None => Computed::Abandoned,
         Some((p, None)) => {
             ctx.stream.busy.store(false, Ordering::Release);
             Computed::Empty(p)
         }
-        Some((p, Some(taken))) => Computed::Done(p, taken),
+        Some((p, Some(taken))) => Computed::Done(p, taken, sent),
     }
 }
 
@@ -640,27 +659,43 @@ struct Sent {
     failed: u64,
 }
 
-/// Publish a frame's outputs.
-async fn publish_outputs(
-    pubs: &Publishers,
-    topic: &str,
-    outputs: Vec<super::backend::Output>,
-) -> Sent {
-    let (mut published, mut failed) = (0, 0);
-    for out in outputs {
-        let Some(publ) = pubs.get(&out.kind) else {
-            failed += 1;
-            continue;
+impl Sent {
+    fn add(&mut self, other: Sent) {
+        self.published += other.published;
+        self.failed += other.failed;
+    }
+}
+
+/// Publish one output.
+async fn publish_output(pubs: &Publishers, topic: &str, out: Output) -> Sent {
+    let Some(publ) = pubs.get(&out.kind) else {
+        return Sent {
+            published: 0,
+            failed: 1,
         };
-        match publ.put(out.payload).await {
-            Ok(()) => published += 1,
-            Err(e) => {
-                tracing::warn!(%topic, error = %e, "publish failed");
-                failed += 1;
+    };
+    match publ.put(out.payload).await {
+        Ok(()) => Sent {
+            published: 1,
+            failed: 0,
+        },
+        Err(e) => {
+            tracing::warn!(%topic, error = %e, "publish failed");
+            Sent {
+                published: 0,
+                failed: 1,
             }
         }
     }
-    Sent { published, failed }
+}
+
+/// Publish a stream's final outputs.
+async fn publish_outputs(pubs: &Publishers, topic: &str, outputs: Vec<Output>) -> Sent {
+    let mut sent = Sent::default();
+    for out in outputs {
+        sent.add(publish_output(pubs, topic, out).await);
+    }
+    sent
 }
 
 /// Add one processed frame to the stream's statistics.
