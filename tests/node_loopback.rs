@@ -222,7 +222,12 @@ struct Rig {
 }
 
 async fn rig(h: &Participant, name: &str, cfg: NodeConfig) -> Rig {
-    let backend = Arc::new(TestBackend::default());
+    rig_with(h, name, cfg, TestBackend::default()).await
+}
+
+/// [`rig`] with the given backend.
+async fn rig_with(h: &Participant, name: &str, cfg: NodeConfig, backend: TestBackend) -> Rig {
+    let backend = Arc::new(backend);
     let (seen, receipts) = (backend.seen.clone(), backend.receipts.clone());
     let (stop_tx, node) = spawn_node(cfg, backend);
     let (_markers_sub, markers) = collect(
@@ -567,25 +572,18 @@ fn index_of(r: &Received) -> u64 {
 async fn a_mesh_leaves_before_the_frames_later_outputs_are_made() {
     let (h, cfg) = harness("early").await;
     let tail = Duration::from_millis(400);
-    let backend = Arc::new(TestBackend {
+    let backend = TestBackend {
         tail: Some(tail),
         ..TestBackend::default()
-    });
-    let (stop_tx, node) = spawn_node(cfg, backend);
-    let (_msub, meshes) = collect(&h, "/early/**", &any_type("sepmem_msgs/msg/SurfaceMesh")).await;
-    let (_dsub, diags) = collect(
-        &h,
-        "/early/**",
-        &any_type("sepmem_msgs/msg/FrameDiagnostics"),
-    )
-    .await;
-    let points = h
-        .publisher("/early/points", &pc2(), Qos::SENSOR_DATA)
-        .await
-        .unwrap();
+    };
+    let r = rig_with(&h, "early", cfg, backend).await;
+    let mesh = any_type("sepmem_msgs/msg/SurfaceMesh");
+    let (_msub, meshes) = collect(&h, "/early/**", &mesh).await;
+    let diag = any_type("sepmem_msgs/msg/FrameDiagnostics");
+    let (_dsub, diags) = collect(&h, "/early/**", &diag).await;
     let mut k = 0;
     probe(
-        &points,
+        &r.points,
         || diags.lock().unwrap().len() >= 3,
         || {
             k += 1;
@@ -607,7 +605,7 @@ async fn a_mesh_leaves_before_the_frames_later_outputs_are_made() {
             "frame {i}: the mesh arrived only {ahead:?} before the diagnostics (tail {tail:?})"
         );
     }
-    let summary = stop(stop_tx, node).await;
+    let summary = stop(r.stop_tx, r.node).await;
     assert!(summary.clean_shutdown);
 }
 
