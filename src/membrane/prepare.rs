@@ -125,34 +125,79 @@ fn quantile(d: &mut [f64], q: f64, scale: f64) -> f64 {
         .max(1e-9 * scale)
 }
 
-/// Prepare `cloud` (see the module docs).
-pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepared, MembraneError> {
-    let t_start = Instant::now();
-    let points_in = cloud.len();
-    // Indices (into `cloud`) of the points kept by each step, so that the
-    // attribute channels of the weighted mode follow the same selection.
+/// The finite, distinct points of a cloud, thinned to `prepare.max_points`,
+/// with the indices (into the cloud) they came from, so that the attribute
+/// channels of the weighted mode follow the same selection.
+struct Usable {
+    idx: Vec<usize>,
+    points: Vec<Vec3>,
+    non_finite: usize,
+    duplicate: usize,
+    thinned: usize,
+}
+
+/// The [`Usable`] points of `cloud`, or why there are too few, or they
+/// span no volume.
+fn usable(cloud: &PointCloud, p: &PrepareConfig) -> Result<Usable, MembraneError> {
     let (finite_idx, non_finite) = finite_distinct(cloud);
-    let duplicate = points_in - non_finite - finite_idx.len();
+    let duplicate = cloud.len() - non_finite - finite_idx.len();
     let finite_len = finite_idx.len();
-    let p = &cfg.prepare;
-    let finite_idx = match p.max_points {
+    let idx = match p.max_points {
         Some(cap) => thin(finite_idx, cap),
         None => finite_idx,
     };
-    let thinned = finite_len - finite_idx.len();
-    let finite: Vec<Vec3> = finite_idx.iter().map(|&i| cloud.points[i]).collect();
-    if finite.is_empty() {
+    let thinned = finite_len - idx.len();
+    let points: Vec<Vec3> = idx.iter().map(|&i| cloud.points[i]).collect();
+    if points.is_empty() {
         return Err(CloudError::Empty.into());
     }
-    if finite.len() < MIN_POINTS {
-        let got = finite.len();
+    if points.len() < MIN_POINTS {
+        let got = points.len();
         return Err(CloudError::TooFewPoints {
             got,
             need: MIN_POINTS,
         }
         .into());
     }
-    crate::cloud::check_spread(&finite)?;
+    crate::cloud::check_spread(&points)?;
+    Ok(Usable {
+        idx,
+        points,
+        non_finite,
+        duplicate,
+        thinned,
+    })
+}
+
+/// The cuboid search's grid. The weighted profile sums attributes per slab,
+/// and a local δ averages the gathered points' spacings, in the order the
+/// grid gathers them: their results depend (in the last bits, then through
+/// the argmax) on the cell size, so they keep the automatic cell; the
+/// order-free default search gets cells of [`SEARCH_CELL_DELTA`] δ.
+fn search_grid(
+    points: &[Vec3],
+    order_free: bool,
+    delta: f64,
+) -> Result<SpatialIndex, MembraneError> {
+    Ok(if order_free {
+        SpatialIndex::with_cell_size(points, SEARCH_CELL_DELTA * delta)?
+    } else {
+        SpatialIndex::new(points)?
+    })
+}
+
+/// Prepare `cloud` (see the module docs).
+pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepared, MembraneError> {
+    let t_start = Instant::now();
+    let points_in = cloud.len();
+    let p = &cfg.prepare;
+    let Usable {
+        idx: finite_idx,
+        points: finite,
+        non_finite,
+        duplicate,
+        thinned,
+    } = usable(cloud, p)?;
     // The frame's one k-NN index: d_i, δ and the outlier filter.
     let knn = KnnIndex::new(finite);
     let finite = knn.points();
@@ -204,17 +249,9 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
         let used: Vec<usize> = keep.iter().map(|&k| finite_idx[k]).collect();
         Some(attribute_set(&cloud.select(&used), cfg, delta)?)
     };
-    // The weighted profile sums attributes per slab, and a local δ averages
-    // the gathered points' spacings, in the order the grid gathers them: their
-    // results depend (in the last bits, then through the argmax) on the cell
-    // size, so they keep the automatic cell.
     let order_free =
         attributes.is_none() && spacing.is_none() && p.search_delta == SearchDelta::Global;
-    let index = if order_free {
-        SpatialIndex::with_cell_size(&points, SEARCH_CELL_DELTA * delta)?
-    } else {
-        SpatialIndex::new(&points)?
-    };
+    let index = search_grid(&points, order_free, delta)?;
     let outside = outside_grid(cfg, &points, spacing.as_deref(), delta, view.as_ref());
     Ok(Prepared {
         counts: PointCounts {
