@@ -610,14 +610,14 @@ async fn compute(ctx: &StreamCtx, pubs: &Publishers, mut p: Box<dyn TopicProcess
     tokio::pin!(stop);
     let done = loop {
         tokio::select! {
-            Some(out) = out_rx.recv() => sent.add(publish_output(pubs, &ctx.topic, out).await),
+            Some(out) = out_rx.recv() => sent.count(publish_output(pubs, &ctx.topic, out).await),
             r = &mut rx => break r.ok(),
             () = &mut stop => break tokio::time::timeout(shutdown_bound, &mut rx).await.ok().and_then(Result::ok),
         }
     };
     // The outputs handed over just before the result came.
     while let Ok(out) = out_rx.try_recv() {
-        sent.add(publish_output(pubs, &ctx.topic, out).await);
+        sent.count(publish_output(pubs, &ctx.topic, out).await);
     }
     match done {
         None => Computed::Abandoned,
@@ -660,42 +660,34 @@ struct Sent {
 }
 
 impl Sent {
-    fn add(&mut self, other: Sent) {
-        self.published += other.published;
-        self.failed += other.failed;
+    fn count(&mut self, published: bool) {
+        if published {
+            self.published += 1;
+        } else {
+            self.failed += 1;
+        }
     }
 }
 
-/// Publish one output.
-async fn publish_output(pubs: &Publishers, topic: &str, out: Output) -> Sent {
+/// Publish one output; whether zenoh took it.
+async fn publish_output(pubs: &Publishers, topic: &str, out: Output) -> bool {
     let Some(publ) = pubs.get(&out.kind) else {
-        return Sent {
-            published: 0,
-            failed: 1,
-        };
+        return false;
     };
     match publ.put(out.payload).await {
-        Ok(()) => Sent {
-            published: 1,
-            failed: 0,
-        },
+        Ok(()) => true,
         Err(e) => {
             tracing::warn!(%topic, error = %e, "publish failed");
-            Sent {
-                published: 0,
-                failed: 1,
-            }
+            false
         }
     }
 }
 
 /// Publish a stream's final outputs.
-async fn publish_outputs(pubs: &Publishers, topic: &str, outputs: Vec<Output>) -> Sent {
-    let mut sent = Sent::default();
+async fn publish_outputs(pubs: &Publishers, topic: &str, outputs: Vec<Output>) {
     for out in outputs {
-        sent.add(publish_output(pubs, topic, out).await);
+        publish_output(pubs, topic, out).await;
     }
-    sent
 }
 
 /// Add one processed frame to the stream's statistics.
