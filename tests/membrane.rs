@@ -256,8 +256,8 @@ fn ellipsoid_converges() {
 /// Issue 20: 20,000 points of a procedural shape whose density falls 8:1
 /// along its longest axis (`sepmem bench`'s `non_uniform` condition:
 /// [`sepmem::bench::clouds::density_falloff`] of 160,000 area-uniform
-/// samples). Returns F with `prepare.local_spacing` on (its documented
-/// settings) and off (the default: the global δ everywhere).
+/// samples). Returns F with `prepare.local_spacing` on (the default) and
+/// off (the global δ everywhere).
 fn non_uniform_f(name: &str, seed: u64) -> (f64, f64) {
     use sepmem::bench::clouds::{density_falloff, NON_UNIFORM_RATIO};
     let gt = sepmem::shapes::by_name(name, 96).unwrap().mesh;

@@ -53,12 +53,11 @@ pub const THRESHOLD: f64 = 0.003;
 /// Pure cost bounds (`prepare.max_points`, `schedule.time_limit_ms`,
 /// `schedule.growth.max_control_per_point`, iteration caps) are not
 /// mechanisms and are not switched.
-pub const MECHANISMS: [&str; 17] = [
+pub const MECHANISMS: [&str; 18] = [
     "membrane.prepare.outlier_factor=null",
     // Off by default (global δ): switched on.
     "membrane.prepare.search_delta=local",
-    // Off by default (issue 20, not yet measured on single views): switched on.
-    "membrane.prepare.local_spacing={neighbours: 32, tolerance: 1.0}",
+    "membrane.prepare.local_spacing=null",
     // membrane.prepare.density_sample is null by default; the pipeline's warm
     // frames use it (pipeline.warm_density_sample 256): 0 switches it off there.
     "pipeline.warm_density_sample=0",
@@ -74,8 +73,9 @@ pub const MECHANISMS: [&str; 17] = [
     "membrane.fit.redistribute_stretch=null",
     "membrane.schedule.growth=null",
     "membrane.view.viewpoint=none",
-    // Off by default ("none"): switched on.
+    // Off by default ("none", null): switched on.
     "membrane.view.completion=mirror",
+    "membrane.view.back={extent: 1.0}",
 ];
 
 /// The five figures of one configuration (mean F-scores).

@@ -108,7 +108,8 @@ pub struct PrepareConfig {
     /// With the global δ: the search's δ_R from the spacing of the points
     /// near each cuboid, never below δ, an outlier filter relative to the
     /// kept neighbours and area-weighted occupancy counts
-    /// ([`super::spacing`]); `None`: the global δ everywhere.
+    /// ([`super::spacing`], on by default; the weighted mode keeps only the
+    /// filter); `None`: the global δ everywhere.
     pub local_spacing: Option<LocalSpacingConfig>,
 }
 
@@ -130,7 +131,7 @@ impl Default for LocalSpacingConfig {
     fn default() -> Self {
         Self {
             neighbours: 32,
-            tolerance: 1.0,
+            tolerance: 1.25,
         }
     }
 }
@@ -145,7 +146,7 @@ impl Default for PrepareConfig {
             search_delta: SearchDelta::Global,
             delta_quantile: 0.25,
             delta_scale: 1.3,
-            local_spacing: None,
+            local_spacing: Some(LocalSpacingConfig::default()),
         }
     }
 }
@@ -449,6 +450,26 @@ pub struct ViewConfig {
     pub viewpoint: super::view::Viewpoint,
     /// How the unseen side of a single view is completed.
     pub completion: Completion,
+    /// The bound on the depth of the unseen side behind the seen front
+    /// ([`super::view`], 4.); `None` (the default): unbounded (only the
+    /// completion's back, with `completion = "mirror"`).
+    pub back: Option<BackConfig>,
+}
+
+/// `membrane.view.back`: nothing of a single view's object lies deeper than
+/// `z₀ + extent · max(V, min(Lᵤ, L_w))` behind its seen front `z₀` (`V` the
+/// visible depth, `Lᵤ, L_w` the lateral extents).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BackConfig {
+    /// The factor on the seen extent (positive).
+    pub extent: f64,
+}
+
+impl Default for BackConfig {
+    fn default() -> Self {
+        Self { extent: 1.0 }
+    }
 }
 
 impl Default for ViewConfig {
@@ -456,6 +477,7 @@ impl Default for ViewConfig {
         Self {
             viewpoint: super::view::Viewpoint::Mode(super::view::ViewMode::Auto),
             completion: Completion::None,
+            back: None,
         }
     }
 }
@@ -521,7 +543,12 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), ConfigError> {
     validate_step(&cfg.step)?;
     validate_regularize(&cfg.regularize)?;
     validate_fit(&cfg.fit)?;
-    validate_schedule(&cfg.schedule, cfg.init.grid)
+    validate_schedule(&cfg.schedule, cfg.init.grid)?;
+    check(
+        cfg.view.back.as_ref().is_none_or(|b| pos(b.extent)),
+        "view.back.extent",
+        "must be positive (null leaves the back unbounded)",
+    )
 }
 
 fn validate_prepare(p: &PrepareConfig) -> Result<(), ConfigError> {

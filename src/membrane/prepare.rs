@@ -220,8 +220,8 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
     }
     let mut d_order = d_kept.clone();
     let median = quantile(&mut d_order, 0.5, scale);
-    // Single views: the viewpoint, its z-buffer, and the mirrored completion
-    // of the unseen side (membrane/view.rs).
+    // Single views: the viewpoint, its z-buffer, the bound on the unseen
+    // side's depth and its mirrored completion (membrane/view.rs).
     let mut view = view::resolve(cfg.view.viewpoint, &points, median);
     let delta = if view.is_some() {
         median
@@ -240,10 +240,10 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
     let spacing = p
         .local_spacing
         .as_ref()
-        .filter(|_| exact && p.search_delta == SearchDelta::Global)
+        .filter(|_| exact && p.search_delta == SearchDelta::Global && !weighted(cfg))
         .map(|l| super::spacing::local_spacing(&points, &d_used, delta, l));
     // Weighted mode (paper Eq. 9): the attribute channels of the used points.
-    let attributes = if cfg.step.attributes.is_empty() && cfg.step.spatial_weight == 1.0 {
+    let attributes = if !weighted(cfg) {
         None
     } else {
         let used: Vec<usize> = keep.iter().map(|&k| finite_idx[k]).collect();
@@ -275,18 +275,30 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
     })
 }
 
-/// A single view's mirrored completion of its unseen side
-/// (`view.completion`), appended to `points` and `d_used` (each mirror
-/// point takes its source's d_i); returns how many were added.
+/// Whether the search runs in the weighted mode (paper Eq. 9): attribute
+/// channels, or a spatial weight other than 1.
+fn weighted(cfg: &MembraneConfig) -> bool {
+    !cfg.step.attributes.is_empty() || cfg.step.spatial_weight != 1.0
+}
+
+/// A single view's back bound (`view.back`) and mirrored completion of its
+/// unseen side (`view.completion`), appended to `points` and `d_used` (each
+/// mirror point takes its source's d_i); returns how many were added.
 fn complete_view(
     cfg: &MembraneConfig,
     view: Option<&mut view::ViewBuffer>,
     points: &mut Vec<Vec3>,
     d_used: &mut Vec<f64>,
 ) -> usize {
-    let Some(vb) = view.filter(|_| cfg.view.completion == Completion::Mirror) else {
+    let Some(vb) = view else {
         return 0;
     };
+    if let Some(back) = &cfg.view.back {
+        vb.bound_back(points, back.extent);
+    }
+    if cfg.view.completion != Completion::Mirror {
+        return 0;
+    }
     let extra = vb.complete(points);
     vb.set_back(extra.iter().map(|(q, _)| q));
     points.reserve(extra.len());
