@@ -8,9 +8,10 @@
 //!    there is one and the object did not jump or change size beyond the
 //!    configured bounds, **cold** (the paper's six-extreme-point octagon,
 //!    §III-E) otherwise;
-//! 3. for a warm start, compensates the motion: centroid shift, then a few
-//!    rigid point-to-plane ICP steps of the previous surface onto the new points
-//!    ([`align`]);
+//! 3. for a warm start, compensates the motion: a few rigid point-to-plane
+//!    ICP steps of the previous surface onto the new points from the
+//!    centroid shift, and from the last motion and from rest when those fit
+//!    clearly better ([`align`]);
 //! 4. evolves the membrane (paper §III-D/E steps 2–5) under the frame's
 //!    budget: an iteration cap (small for warm frames) and a wall-clock
 //!    deadline shared by all attempts of the frame;
@@ -284,6 +285,8 @@ struct Previous {
     eta: f64,
     /// η_g of the stream's last cold frame (the drift reference).
     eta_ref: f64,
+    /// The rigid motion of the last frame (identity after a cold one).
+    motion: align::Rigid,
 }
 
 impl Previous {
@@ -564,6 +567,10 @@ impl Tracker {
             size,
             eta: rec.report.eta_final,
             eta_ref,
+            motion: match final_path {
+                StartPath::Warm => motion.unwrap_or_else(align::Rigid::identity),
+                StartPath::Cold => align::Rigid::identity(),
+            },
         });
         Ok(FrameResult {
             stream: self.key.clone(),
@@ -645,20 +652,24 @@ impl Tracker {
             centroid.y - prev.centroid.y,
             centroid.z - prev.centroid.z,
         );
-        let motion = if cfg.icp_steps > 0 {
-            align::align(
-                &prev.model,
-                Some(&prev.normals),
-                &cloud.points,
-                shift,
-                cfg.icp_steps,
-                cfg.icp_trim * scale,
-                cfg.icp_max_points,
-            )
-            .motion
+        // From the centroid's shift; then from the last frame's motion
+        // (constant velocity) and from rest, when the shift is no start at
+        // all (align.rs, align_from).
+        let starts: &[align::Rigid] = if cfg.icp_steps > 0 {
+            &[shift, prev.motion, align::Rigid::identity()]
         } else {
-            shift
+            &[shift]
         };
+        let motion = align::align_from(
+            &prev.model,
+            Some(&prev.normals),
+            &cloud.points,
+            starts,
+            cfg.icp_steps,
+            cfg.icp_trim * scale,
+            cfg.icp_max_points,
+        )
+        .map_or(shift, |a| a.motion);
         match prev.surface.rigidly_moved(&motion) {
             Ok(surface) => (
                 StartPath::Warm,
