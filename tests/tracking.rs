@@ -10,21 +10,9 @@
 //! frame as the only cold one and a closed box over the last third.
 #![allow(clippy::unwrap_used)]
 
-use std::process::Command;
+mod common;
 
-fn sepmem(args: &[&str]) -> String {
-    let o = Command::new(env!("CARGO_BIN_EXE_sepmem"))
-        .args(args)
-        .output()
-        .unwrap();
-    let out = String::from_utf8_lossy(&o.stdout).to_string();
-    assert!(
-        o.status.success(),
-        "sepmem {args:?}: {out}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    out
-}
+use common::sepmem_stdout as sepmem;
 
 /// The number after `label` in `text`.
 fn figure(text: &str, label: &str) -> f64 {

@@ -7,8 +7,9 @@
 //! and per third of the sequence, finite and in range.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use nalgebra::Isometry3;
 use sepmem::bag::Bag;
@@ -72,6 +73,7 @@ fn untracked_motion_drifts_by_the_true_turn_and_coverage_grows_to_the_half_turn(
             track,
             posed_truth: &posed,
             mesh: &posed,
+            points: &[],
             warm_motion,
             tau_fraction: TAU,
         };
@@ -126,19 +128,9 @@ fn column(header: &str, name: &str) -> usize {
 
 #[test]
 fn replay_prints_every_view_score_per_frame_and_per_third() {
-    let o = Command::new(env!("CARGO_BIN_EXE_sepmem"))
-        .arg("replay")
-        .arg(mug_bag())
-        .output()
-        .unwrap();
-    let out = String::from_utf8_lossy(&o.stdout).to_string();
-    assert!(
-        o.status.success(),
-        "{out}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let out = common::sepmem_stdout(&[std::ffi::OsStr::new("replay"), mug_bag().as_os_str()]);
     let header = out.lines().find(|l| l.starts_with("stream")).unwrap();
-    let cols = ["F", "seen", "IoU", "rot", "tr_mm", "cover"].map(|c| column(header, c));
+    let cols = ["F", "seen", "IoU", "rot", "tr_mm", "cover", "out3s"].map(|c| column(header, c));
     let rows: Vec<Vec<f64>> = out
         .lines()
         .filter(|l| l.starts_with(STREAM))
@@ -151,7 +143,7 @@ fn replay_prints_every_view_score_per_frame_and_per_third() {
     let mut cover = 0.0;
     for (k, r) in rows.iter().enumerate() {
         assert!(r.iter().all(|x| x.is_finite()), "{k}: {r:?}");
-        for &share in &[r[0], r[1], r[2], r[5]] {
+        for &share in &[r[0], r[1], r[2], r[5], r[6]] {
             assert!((0.0..=1.0).contains(&share), "{k}: {r:?}");
         }
         assert!((0.0..=180.0).contains(&r[3]) && r[4] >= 0.0, "{k}: {r:?}");
@@ -169,6 +161,7 @@ fn replay_prints_every_view_score_per_frame_and_per_third() {
         "last third (10): F ",
         "seen side median ",
         "pose error max rot ",
+        "points outside by > 3 sigma ",
     ] {
         assert!(summary.contains(part), "{summary}");
     }

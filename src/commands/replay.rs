@@ -17,8 +17,10 @@
 //! scores of [`sepmem::eval::view`] follow at the end of each row (`seen`
 //! side depth accuracy, volume `IoU` with the true solid, `rot` (°) and
 //! `tr_mm` error of the tracked pose, `cover`: share of the true surface
-//! seen so far), and a `view` line per stream gives them, with F, over the
-//! first and the last third of the frames.
+//! seen so far, `out3s`: share of the points on the true surface that lie
+//! outside the mesh by more than 3σ of the sensor noise), and a `view` line
+//! per stream gives them, with F, over the first and the last third of the
+//! frames, and the points left out over all frames.
 //!
 //! `--compare-cold` also reconstructs every frame from a cold start (no
 //! deadline, the cold iteration cap) outside the timed pipeline, and reports
@@ -264,8 +266,8 @@ pub fn run_opts(
     }
     if scored {
         header += &format!(
-            " {:>6} {:>6} {:>6} {:>6} {:>6}",
-            "seen", "IoU", "rot", "tr_mm", "cover"
+            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
+            "seen", "IoU", "rot", "tr_mm", "cover", "out3s"
         );
     }
     print(header);
@@ -371,7 +373,9 @@ pub fn run_opts(
                         }
                     }
                     if let Some(gt) = &gt {
-                        let v = view_score(&truth, entry, &id, stamp, gt, r, cfg.metrics.tau)?;
+                        let at = (id.as_str(), stamp);
+                        let points = &sc.cloud.points;
+                        let v = view_score(&truth, entry, at, gt, r, points, cfg.metrics.tau)?;
                         line += &view_columns(v.as_ref());
                     } else if scored {
                         line += &view_columns(None);
@@ -515,15 +519,16 @@ pub fn run_opts(
     Ok(())
 }
 
-/// The robot's-view scores of one frame, recorded in the stream's summary
-/// (`None` when the bag has no truth frame for this stamp).
+/// The robot's-view scores of one frame of stream `at.0` at stamp `at.1`
+/// (its input `points`), recorded in the stream's summary (`None` when the
+/// bag has no truth frame for this stamp).
 fn view_score(
     truth: &GroundTruthIndex,
     entry: &mut StreamSummary,
-    id: &str,
-    stamp: i64,
+    (id, stamp): (&str, i64),
     posed_truth: &sepmem::TriMesh,
     r: &sepmem::pipeline::FrameResult,
+    points: &[sepmem::Vec3],
     tau_fraction: f64,
 ) -> Result<Option<ViewScore>> {
     let (Some(track), Some(frame)) = (truth.streams.get(id), truth.frame(id, stamp)) else {
@@ -536,6 +541,7 @@ fn view_score(
             track,
             posed_truth,
             mesh: &r.reconstruction.mesh,
+            points,
             warm_motion: r.motion.filter(|_| r.path == StartPath::Warm),
             tau_fraction,
         })
@@ -544,19 +550,25 @@ fn view_score(
     Ok(Some(v))
 }
 
-/// The per-frame columns `seen IoU rot tr_mm cover` (dashes without a score).
+/// The per-frame columns `seen IoU rot tr_mm cover out3s` (dashes without
+/// a score); `out3s` is the share of the points on the true surface that
+/// lie outside the mesh by more than 3σ.
 fn view_columns(v: Option<&ViewScore>) -> String {
     let opt = |x: Option<f64>| x.map_or_else(|| "-".to_string(), |x| format!("{x:.3}"));
     match v {
         Some(v) => format!(
-            " {:>6} {:>6} {:>6.2} {:>6.1} {:>6.3}",
+            " {:>6} {:>6} {:>6.2} {:>6.1} {:>6.3} {:>6}",
             opt(v.seen_side),
             opt(v.volume_iou),
             v.rotation_deg,
             v.translation_mm,
-            v.coverage
+            v.coverage,
+            opt(v.outside.share())
         ),
-        None => format!(" {:>6} {:>6} {:>6} {:>6} {:>6}", "-", "-", "-", "-", "-"),
+        None => format!(
+            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
+            "-", "-", "-", "-", "-", "-"
+        ),
     }
 }
 
@@ -585,14 +597,18 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
     let mut seen: Vec<f64> = views.iter().filter_map(|v| v.seen_side).collect();
     seen.sort_by(f64::total_cmp);
     let all = |g: fn(&ViewScore) -> f64| views.iter().map(g).collect::<Vec<_>>();
+    let on_surface: usize = views.iter().map(|v| v.outside.on_surface).sum();
+    let outside: usize = views.iter().map(|v| v.outside.outside).sum();
     format!(
-        "view {id}: {n} frames; first third ({third}): {}; last third ({third}): {}; seen side median {:.3} min {:.3}; pose error max rot {:.2} deg trans {:.1} mm",
+        "view {id}: {n} frames; first third ({third}): {}; last third ({third}): {}; seen side median {:.3} min {:.3}; pose error max rot {:.2} deg trans {:.1} mm; points outside by > 3 sigma {outside} of {on_surface} ({} frames with any), worst {:.1} sigma",
         part(0..third),
         part(n - third..n),
         percentile(&seen, 0.5),
         min(&seen),
         max(&all(|v| v.rotation_deg)),
         max(&all(|v| v.translation_mm)),
+        views.iter().filter(|v| v.outside.outside > 0).count(),
+        max(&all(|v| v.outside.worst_sigmas)),
     )
 }
 

@@ -17,6 +17,13 @@
 //!   motions since the stream's last cold frame, anchored at the true pose
 //!   of that cold frame (a cold frame re-anchors it, so its error is 0):
 //!   the drift of the warm chain;
+//! - **points outside**: the frame's points on the true surface (within
+//!   [`OUTSIDE_SIGMAS`] σ(z) of it) that lie outside the mesh by more than
+//!   [`OUTSIDE_SIGMAS`] σ(z), σ the Kinect axial noise of `sepmem synth`'s
+//!   default ([`crate::synth::Noise::kinect`]; a replay does not know the
+//!   bag's noise model), and the largest such distance in σ
+//!   ([`crate::synth::view_metrics::points_outside`]): the issue's "no
+//!   visible point lies outside the mesh by more than 3σ";
 //! - **coverage**: the share of the true surface (object frame,
 //!   [`COVERAGE_SAMPLES`] area-uniform samples) seen so far by the camera,
 //!   with the simulator's incidence cut-off [`COVERAGE_MAX_INCIDENCE_DEG`]
@@ -25,11 +32,15 @@
 
 use nalgebra::Isometry3;
 
+use crate::cloud::Vec3;
 use crate::mesh::TriMesh;
 use crate::pipeline::align::Rigid;
 use crate::synth::raycast::RaycastError;
 use crate::synth::truth::{TruthFrame, TruthTrack};
-use crate::synth::view_metrics::{pose_error, seen_side_accuracy, volume_iou, Coverage};
+use crate::synth::view_metrics::{
+    points_outside, pose_error, seen_side_accuracy, volume_iou, Coverage, PointsOutside,
+};
+use crate::synth::Noise;
 
 /// Grid cells along the longest edge of the volume IoU's grid.
 pub const IOU_CELLS: usize = 32;
@@ -38,6 +49,9 @@ pub const COVERAGE_SAMPLES: usize = 4000;
 /// Incidence beyond which a surface sample does not count as seen (the
 /// simulator's Kinect cut-off).
 pub const COVERAGE_MAX_INCIDENCE_DEG: f64 = 80.0;
+/// Points count as on the true surface within, and as left out beyond,
+/// this many σ(z) of the sensor noise.
+pub const OUTSIDE_SIGMAS: f64 = 3.0;
 /// Seed of the coverage samples.
 const COVERAGE_SEED: u64 = 20;
 
@@ -54,6 +68,8 @@ pub struct ViewScore {
     pub translation_mm: f64,
     /// Share of the true surface seen so far on this stream.
     pub coverage: f64,
+    /// The frame's points on the true surface that the mesh leaves out.
+    pub outside: PointsOutside,
 }
 
 /// What [`ViewTracker::score`] needs of one frame.
@@ -67,6 +83,8 @@ pub struct ViewFrame<'a> {
     pub posed_truth: &'a TriMesh,
     /// The reconstruction, in the cloud frame.
     pub mesh: &'a TriMesh,
+    /// The frame's input points, in the cloud frame.
+    pub points: &'a [Vec3],
     /// The rigid motion of a warm frame (previous surface → this frame's
     /// points); `None` for a cold frame.
     pub warm_motion: Option<Rigid>,
@@ -90,6 +108,14 @@ impl ViewTracker {
         let tau = f.tau_fraction * f.posed_truth.aabb().longest_edge();
         let seen = seen_side_accuracy(&f.truth.camera, f.posed_truth, f.mesh, tau)?;
         let iou = volume_iou(f.mesh, f.posed_truth, IOU_CELLS)?;
+        let noise = Noise::kinect();
+        let outside = points_outside(
+            f.points,
+            f.posed_truth,
+            f.mesh,
+            |z| noise.sigma(z),
+            OUTSIDE_SIGMAS,
+        )?;
         let pose = match (f.warm_motion, self.pose) {
             (Some(m), Some(prev)) => m * prev,
             _ => f.truth.pose,
@@ -103,6 +129,7 @@ impl ViewTracker {
             rotation_deg: err.rotation_rad.to_degrees(),
             translation_mm: err.translation_m * 1e3,
             coverage,
+            outside,
         })
     }
 

@@ -228,7 +228,7 @@ impl fmt::Display for PathReason {
             Self::Resized { fraction } => write!(f, "resized({fraction:.2})"),
             Self::WarmFailed { eta, previous } => write!(f, "warm_failed({eta:.3}<{previous:.3})"),
             Self::Drifted { eta, reference } => write!(f, "drifted({eta:.3}<{reference:.3})"),
-            Self::WarmKept { eta, cold } => write!(f, "warm_kept({eta:.3},cold {cold:.3})"),
+            Self::WarmKept { eta, cold } => write!(f, "warm_kept({eta:.3},cold={cold:.3})"),
         }
     }
 }

@@ -7,7 +7,7 @@
 //! ray (Jordan parity), which is exact for closed meshes.
 
 use nalgebra::{Point3, Vector3};
-use parry3d_f64::query::{Ray, RayCast};
+use parry3d_f64::query::{PointQuery, Ray, RayCast};
 use parry3d_f64::shape::{FeatureId, TriMesh as ParryMesh, TriMeshFlags};
 use thiserror::Error;
 
@@ -97,6 +97,12 @@ impl MeshCaster {
     /// Unit normal of triangle `t` (zero for a degenerate triangle).
     pub fn normal(&self, t: u32) -> Vec3 {
         self.normals.get(t as usize).copied().unwrap_or_default()
+    }
+
+    /// Distance from `p` to the nearest point of the mesh's surface.
+    pub fn distance(&self, p: &Vec3) -> f64 {
+        let q = Point3::from(*p);
+        (self.shape.project_local_point(&q, false).point - q).norm()
     }
 
     /// Whether `p` is inside the closed mesh: the parity of the crossings of

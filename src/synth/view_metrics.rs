@@ -89,6 +89,66 @@ pub fn seen_side_accuracy(
     })
 }
 
+/// Result of [`points_outside`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointsOutside {
+    /// Points on the true surface: within `k`·σ(z) of it (the others are
+    /// the sensor's outliers and flying pixels).
+    pub on_surface: usize,
+    /// Of those, the points outside the mesh by more than `k`·σ(z).
+    pub outside: usize,
+    /// The largest distance outside the mesh of any of them, in units of
+    /// its σ(z) (0 when none lies outside the mesh).
+    pub worst_sigmas: f64,
+}
+
+impl PointsOutside {
+    /// The share of the on-surface points outside the mesh by more than
+    /// `k`·σ(z) (`None` without on-surface points).
+    pub fn share(&self) -> Option<f64> {
+        (self.on_surface > 0).then(|| self.outside as f64 / self.on_surface as f64)
+    }
+}
+
+/// The visible points that the mesh leaves out (issue 20: "no visible point
+/// may lie outside the mesh by more than the noise"): of `points` (cloud
+/// frame, the camera at the origin looking along +z) those within
+/// `k`·σ(z) of the true surface `truth`, the ones outside the closed `mesh`
+/// and farther than `k`·σ(z) from it, with `sigma` the sensor's axial noise
+/// at depth z.
+///
+/// # Errors
+/// [`RaycastError`] when either mesh cannot be ray cast.
+pub fn points_outside(
+    points: &[Vec3],
+    truth: &TriMesh,
+    mesh: &TriMesh,
+    sigma: impl Fn(f64) -> f64 + Sync,
+    k: f64,
+) -> Result<PointsOutside, RaycastError> {
+    let (truth, mesh) = (MeshCaster::new(truth)?, MeshCaster::new(mesh)?);
+    let per_point = |p: &Vec3| -> (usize, usize, f64) {
+        let s = sigma(p.z).max(f64::MIN_POSITIVE);
+        if !(p.iter().all(|c| c.is_finite()) && truth.distance(p) <= k * s) {
+            return (0, 0, 0.0);
+        }
+        if mesh.contains(p) {
+            return (1, 0, 0.0);
+        }
+        let d = mesh.distance(p) / s;
+        (1, usize::from(d > k), d)
+    };
+    let (on_surface, outside, worst_sigmas) = points
+        .par_iter()
+        .map(per_point)
+        .reduce(|| (0, 0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2.max(b.2)));
+    Ok(PointsOutside {
+        on_surface,
+        outside,
+        worst_sigmas,
+    })
+}
+
 /// Result of [`volume_iou`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VolumeIou {
@@ -281,6 +341,38 @@ mod tests {
             *v = c + *v * (2.0 * r);
         }
         m
+    }
+
+    #[test]
+    fn points_outside_count_the_surface_points_a_smaller_mesh_leaves_out() {
+        let c = Vec3::new(0.0, 0.0, 1.0);
+        let truth = sphere(0.1, c);
+        // The camera-side cap of the true sphere, and two outliers 5 cm off.
+        let mut points: Vec<Vec3> = crate::shapes::fibonacci_sphere(400)
+            .into_iter()
+            .filter(|d| d.z < 0.0)
+            .map(|d| c + d * 0.1)
+            .collect();
+        let cap = points.len();
+        points.push(c + Vec3::new(0.0, 0.0, -0.15));
+        points.push(c + Vec3::new(0.15, 0.0, 0.0));
+        let sigma = |_z: f64| 0.002;
+        // The true mesh leaves nothing out (the lattice's flat facets lie
+        // within 0.1 mm of the sphere).
+        let exact = points_outside(&points, &truth, &truth, sigma, 3.0).unwrap();
+        assert_eq!(exact.on_surface, cap);
+        assert_eq!((exact.outside, exact.share()), (0, Some(0.0)));
+        // 5 mm smaller (2.5 σ): outside, but within 3 σ; 8 mm smaller (4 σ):
+        // every point is left out, by about 4 σ.
+        let near = points_outside(&points, &truth, &sphere(0.095, c), sigma, 3.0).unwrap();
+        assert_eq!(near.outside, 0);
+        assert!((near.worst_sigmas - 2.5).abs() < 0.1, "{near:?}");
+        let far = points_outside(&points, &truth, &sphere(0.092, c), sigma, 3.0).unwrap();
+        assert_eq!((far.outside, far.share()), (cap, Some(1.0)));
+        assert!((far.worst_sigmas - 4.0).abs() < 0.1, "{far:?}");
+        // A larger mesh holds every point.
+        let big = points_outside(&points, &truth, &sphere(0.11, c), sigma, 3.0).unwrap();
+        assert_eq!((big.outside, big.worst_sigmas), (0, 0.0));
     }
 
     #[test]

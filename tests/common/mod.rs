@@ -93,3 +93,19 @@ pub fn external_bag_check(bag: &Path, args: &[String], test: &str) -> Option<Str
     );
     Some(stdout)
 }
+
+/// Run the built `sepmem` with `args`; its stdout, after asserting that it
+/// succeeded (the failure message holds both streams).
+pub fn sepmem_stdout<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> String {
+    let o = Command::new(env!("CARGO_BIN_EXE_sepmem"))
+        .args(args)
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(
+        o.status.success(),
+        "sepmem failed: {out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    out
+}
