@@ -44,6 +44,9 @@ fn second_mesh_distance(model: bool, first: &[Vec3], second: &[Vec3], probe: &[V
     // A strip across the previous one separates poorly from the previous
     // surface; keep the warm frame (a cold restart restarts the model).
     cfg.pipeline.warm_eta_ratio = 0.0;
+    // Nor is the second strip near the first one's surface: the track is
+    // not lost, the view moved across the still sphere.
+    cfg.pipeline.icp_min_inliers = None;
     let membranes = Membranes::new(&cfg.membrane, &cfg.pipeline).unwrap();
     let mut t = Tracker::new(StreamKey::topic("/fused"));
     let a = t

@@ -11,7 +11,9 @@
 //! 3. for a warm start, compensates the motion: a few rigid point-to-plane
 //!    ICP steps of the previous surface onto the new points from the
 //!    centroid shift, and from the last motion and from rest when those fit
-//!    clearly better ([`align`]);
+//!    clearly better ([`align`]); when the aligned surface still explains
+//!    fewer than `icp_min_inliers` of the points, the track is lost and the
+//!    frame starts cold;
 //! 4. evolves the membrane (paper §III-D/E steps 2–5) under the frame's
 //!    budget: an iteration cap (small for warm frames) and a wall-clock
 //!    deadline shared by all attempts of the frame;
@@ -89,6 +91,11 @@ pub struct PipelineConfig {
     pub icp_trim: f64,
     /// At most this many new points per ICP step.
     pub icp_max_points: usize,
+    /// A warm start needs at least this share of the frame's sampled points
+    /// within `icp_trim` of the previous surface once aligned; below it the
+    /// track is lost and the frame starts cold ([`PathReason::LostTrack`]).
+    /// `None`: never.
+    pub icp_min_inliers: Option<Share>,
     /// `membrane.prepare.density_sample` of warm-started frames (0: the membrane's own).
     pub warm_density_sample: usize,
     /// Marker namespace.
@@ -127,6 +134,7 @@ impl Default for PipelineConfig {
             icp_steps: 5,
             icp_trim: 0.03,
             icp_max_points: 300,
+            icp_min_inliers: Some(Share(0.75)),
             warm_density_sample: 256,
             marker_namespace: "sepmem".into(),
             score_samples: 10_000,
@@ -134,6 +142,36 @@ impl Default for PipelineConfig {
             objects: objects::ObjectsConfig::default(),
             model: None,
         }
+    }
+}
+
+/// A share in (0, 1], checked when the configuration is parsed.
+#[derive(Debug, Clone, Copy, PartialEq, PartialOrd, Serialize, Deserialize)]
+#[serde(try_from = "f64", into = "f64")]
+pub struct Share(f64);
+
+impl Share {
+    /// The share.
+    pub fn get(self) -> f64 {
+        self.0
+    }
+}
+
+impl TryFrom<f64> for Share {
+    type Error = String;
+
+    fn try_from(v: f64) -> Result<Self, Self::Error> {
+        if v > 0.0 && v <= 1.0 {
+            Ok(Self(v))
+        } else {
+            Err(format!("{v} is not a share in (0, 1]"))
+        }
+    }
+}
+
+impl From<Share> for f64 {
+    fn from(s: Share) -> Self {
+        s.0
     }
 }
 
@@ -206,6 +244,13 @@ pub enum PathReason {
         /// η_g of the last cold frame.
         reference: f64,
     },
+    /// Aligned, the previous surface held fewer than
+    /// `icp_min_inliers` of the frame's sampled points within `icp_trim`:
+    /// the track is lost, and the frame starts cold.
+    LostTrack {
+        /// The share of the sampled points matched within the trim.
+        inliers: f64,
+    },
     /// A warm result failed one of the checks above, and its cold redo
     /// failed that check too: the frame itself separates worse (a thinner
     /// or edge-on view), and the warm result, which keeps what earlier
@@ -228,6 +273,7 @@ impl fmt::Display for PathReason {
             Self::Resized { fraction } => write!(f, "resized({fraction:.2})"),
             Self::WarmFailed { eta, previous } => write!(f, "warm_failed({eta:.3}<{previous:.3})"),
             Self::Drifted { eta, reference } => write!(f, "drifted({eta:.3}<{reference:.3})"),
+            Self::LostTrack { inliers } => write!(f, "lost_track({inliers:.2})"),
             Self::WarmKept { eta, cold } => write!(f, "warm_kept({eta:.3},cold={cold:.3})"),
         }
     }
@@ -660,7 +706,7 @@ impl Tracker {
         } else {
             &[shift]
         };
-        let motion = align::align_from(
+        let alignment = align::align_from(
             &prev.model,
             Some(&prev.normals),
             &cloud.points,
@@ -668,8 +714,12 @@ impl Tracker {
             cfg.icp_steps,
             cfg.icp_trim * scale,
             cfg.icp_max_points,
-        )
-        .map_or(shift, |a| a.motion);
+        );
+        let inliers = alignment.map_or(1.0, |a| a.inlier_fraction);
+        if cfg.icp_min_inliers.is_some_and(|m| inliers < m.get()) {
+            return cold(PathReason::LostTrack { inliers });
+        }
+        let motion = alignment.map_or(shift, |a| a.motion);
         match prev.surface.rigidly_moved(&motion) {
             Ok(surface) => (
                 StartPath::Warm,
