@@ -78,33 +78,30 @@ pub fn external_bag_check(bag: &Path, args: &[String], test: &str) -> Option<Str
         return None;
     }
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/check_bag.py");
-    let out = Command::new("python3")
-        .arg(script)
-        .arg(bag)
-        .args(args)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "check_bag.py failed on {}:\n{stdout}\n{}",
-        bag.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    Some(stdout)
+    let mut cmd = Command::new("python3");
+    cmd.arg(script).arg(bag).args(args);
+    Some(stdout_of(
+        cmd,
+        &format!("check_bag.py on {}", bag.display()),
+    ))
 }
 
 /// Run the built `sepmem` with `args`; its stdout, after asserting that it
 /// succeeded (the failure message holds both streams).
 pub fn sepmem_stdout<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> String {
-    let o = Command::new(env!("CARGO_BIN_EXE_sepmem"))
-        .args(args)
-        .output()
-        .unwrap();
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_sepmem"));
+    cmd.args(args);
+    stdout_of(cmd, "sepmem")
+}
+
+/// Run `cmd`; its stdout, after asserting that it succeeded (the failure
+/// message names `what` and holds both streams).
+fn stdout_of(mut cmd: Command, what: &str) -> String {
+    let o = cmd.output().unwrap();
     let out = String::from_utf8_lossy(&o.stdout).to_string();
     assert!(
         o.status.success(),
-        "sepmem failed: {out}\n{}",
+        "{what} failed:\n{out}\n{}",
         String::from_utf8_lossy(&o.stderr)
     );
     out
