@@ -367,7 +367,13 @@ fn cold_references_on_other_thinning_subsets_measure_the_reference_spread() {
     // pipeline too) it reproduces the pipeline's result exactly. The
     // others are different inputs, so the references spread.
     let bag = Bag::open(&common::data_dir().join("bags").join("synth_ellipsoid.mcap")).unwrap();
-    let cfg = config(&["pipeline.deadline_ms=0", "pipeline.max_points=1500"]);
+    // Without the fused model: the pipeline's own cold start then sees the
+    // same thinned points as the reference (with it, the model's voxels).
+    let cfg = config(&[
+        "pipeline.deadline_ms=0",
+        "pipeline.max_points=1500",
+        "pipeline.model=null",
+    ]);
     let frames = sepmem::eval::replay_scored(&bag, &cfg, 3).unwrap();
     assert_eq!(frames.len(), 12);
     let first = &frames[0];
@@ -489,11 +495,20 @@ fn a_drifted_warm_frame_is_redone_cold_and_says_why() {
             .inspect(|f| assert_eq!(f.result.path, StartPath::Cold))
             .count()
     };
+    // Frame by frame (no fused model): on the model's fused points no warm
+    // frame of this short sequence falls below its cold frame's η_g.
     let on = scored(
         "synth_ellipsoid.mcap",
-        &["pipeline.deadline_ms=0", "pipeline.warm_eta_ref_ratio=1"],
+        &[
+            "pipeline.deadline_ms=0",
+            "pipeline.warm_eta_ref_ratio=1",
+            "pipeline.model=null",
+        ],
     );
-    let off = scored("synth_ellipsoid.mcap", &["pipeline.deadline_ms=0"]);
+    let off = scored(
+        "synth_ellipsoid.mcap",
+        &["pipeline.deadline_ms=0", "pipeline.model=null"],
+    );
     assert!(count(&on) >= 1, "no frame was redone as drifted");
     assert_eq!(count(&off), 0);
 }

@@ -140,7 +140,7 @@ impl Default for PipelineConfig {
             score_samples: 10_000,
             score_visible_radius: 0.02,
             objects: objects::ObjectsConfig::default(),
-            model: None,
+            model: Some(crate::model::ModelConfig::default()),
         }
     }
 }
@@ -299,7 +299,7 @@ pub struct FrameResult {
     /// Wall-clock time of the frame in ms.
     pub latency_ms: f64,
     /// The object's fused model after this frame, in this frame's cloud
-    /// frame (one point per voxel; `None` unless `pipeline.model` is set).
+    /// frame (one point per voxel; `None` when `pipeline.model` is null).
     pub model: Option<Vec<Vec3>>,
 }
 
@@ -631,8 +631,8 @@ impl Tracker {
         })
     }
 
-    /// Fuse this frame into the stream's model (when `pipeline.model` is
-    /// set) and return the fused points in this frame's cloud frame, the
+    /// Fuse this frame into the stream's model (unless `pipeline.model` is
+    /// null) and return the fused points in this frame's cloud frame, the
     /// input of the membrane. A cold frame restarts the model.
     fn fuse(
         &mut self,
