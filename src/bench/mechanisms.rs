@@ -53,7 +53,7 @@ pub const THRESHOLD: f64 = 0.003;
 /// Pure cost bounds (`prepare.max_points`, `schedule.time_limit_ms`,
 /// `schedule.growth.max_control_per_point`, iteration caps) are not
 /// mechanisms and are not switched.
-pub const MECHANISMS: [&str; 18] = [
+pub const MECHANISMS: [&str; 20] = [
     "membrane.prepare.outlier_factor=null",
     // Off by default (global δ): switched on.
     "membrane.prepare.search_delta=local",
@@ -76,6 +76,10 @@ pub const MECHANISMS: [&str; 18] = [
     // Off by default ("none", null): switched on.
     "membrane.view.completion=mirror",
     "membrane.view.back={extent: 1.0}",
+    // The tracker's mechanisms (they act on the synth replays only); the
+    // fused model is off by default: switched on.
+    "pipeline.icp_min_inliers=null",
+    "pipeline.model={}",
 ];
 
 /// The five figures of one configuration (mean F-scores).
