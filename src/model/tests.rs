@@ -195,3 +195,32 @@ fn memory_stays_under_the_cap_over_a_long_noisy_sequence() {
         model.config().max_bytes()
     );
 }
+
+#[test]
+fn the_voxel_spans_at_least_two_point_spacings_of_the_first_view() {
+    // A 0.1 m sphere of 400 points seen from 1 m: its visible cap's points
+    // lie about 8 mm apart, so the floor (2 spacings) beats the size's
+    // edge (0.02 × 0.1 m = 2 mm).
+    let solid = sphere(0.05, 400);
+    let first = view(&solid, &pose(0.0));
+    let spacing = DepthView::new(&first, Vec3::zeros(), 2.0, 160)
+        .unwrap()
+        .spacing();
+    let mut model = ObjectModel::new(ModelConfig::default(), 0.1);
+    model.integrate(&first, &pose(0.0));
+    let edge = model.memory.voxel_size();
+    assert!(spacing > 0.002, "spacing {spacing}");
+    assert!(
+        (edge - 2.0 * spacing).abs() < 1e-12,
+        "edge {edge}, spacing {spacing}"
+    );
+    // A dense view keeps the size's edge.
+    let dense = view(&sphere(0.05, 200_000), &pose(0.0));
+    let mut model = ObjectModel::new(ModelConfig::default(), 0.1);
+    model.integrate(&dense, &pose(0.0));
+    assert!((model.memory.voxel_size() - 0.002).abs() < 1e-12);
+    // After a reset the next view sets the edge again.
+    model.reset();
+    model.integrate(&first, &pose(0.0));
+    assert!((model.memory.voxel_size() - edge).abs() < 1e-12);
+}
