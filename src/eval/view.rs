@@ -38,7 +38,8 @@ use crate::pipeline::align::Rigid;
 use crate::synth::raycast::RaycastError;
 use crate::synth::truth::{TruthFrame, TruthTrack};
 use crate::synth::view_metrics::{
-    points_outside, pose_error, seen_side_accuracy, volume_iou, Coverage, PointsOutside,
+    points_outside_of, pose_error, seen_side_accuracy_of, volume_iou_of, CastMesh, Coverage,
+    PointsOutside,
 };
 use crate::synth::Noise;
 
@@ -106,16 +107,13 @@ impl ViewTracker {
     /// [`RaycastError`] when a mesh cannot be ray cast.
     pub fn score(&mut self, f: &ViewFrame<'_>) -> Result<ViewScore, RaycastError> {
         let tau = f.tau_fraction * f.posed_truth.aabb().longest_edge();
-        let seen = seen_side_accuracy(&f.truth.camera, f.posed_truth, f.mesh, tau)?;
-        let iou = volume_iou(f.mesh, f.posed_truth, IOU_CELLS)?;
+        // Both hierarchies built once for the three mesh metrics.
+        let (truth, mesh) = (CastMesh::new(f.posed_truth)?, CastMesh::new(f.mesh)?);
+        let seen = seen_side_accuracy_of(&f.truth.camera, &truth, &mesh, tau);
+        let iou = volume_iou_of(&mesh, &truth, IOU_CELLS)?;
         let noise = Noise::kinect();
-        let outside = points_outside(
-            f.points,
-            f.posed_truth,
-            f.mesh,
-            |z| noise.sigma(z),
-            OUTSIDE_SIGMAS,
-        )?;
+        let sigma = |z| noise.sigma(z);
+        let outside = points_outside_of(f.points, &truth, &mesh, sigma, OUTSIDE_SIGMAS);
         let pose = match (f.warm_motion, self.pose) {
             (Some(m), Some(prev)) => m * prev,
             _ => f.truth.pose,

@@ -13,7 +13,9 @@
 //! - [`Coverage`]: the share of the object's surface seen so far over a
 //!   sequence of views, on area-uniform surface samples.
 //!
-//! All ray queries use the first-hit caster of [`super::raycast`].
+//! All ray queries use the first-hit caster of [`super::raycast`]; the
+//! `_of` forms take meshes whose casters ([`CastMesh`]) are built once for
+//! all the metrics of a frame.
 
 use nalgebra::{Isometry3, Point3};
 use rand::{Rng, SeedableRng};
@@ -25,6 +27,29 @@ use super::render::pixel_rect;
 use super::Camera;
 use crate::cloud::{Aabb, Vec3};
 use crate::mesh::TriMesh;
+
+/// A mesh with its ray-casting hierarchy, built once for every metric of
+/// one frame ([`seen_side_accuracy_of`], [`points_outside_of`],
+/// [`volume_iou_of`]).
+pub struct CastMesh<'a> {
+    /// The mesh.
+    pub mesh: &'a TriMesh,
+    /// Its first-hit caster.
+    pub caster: MeshCaster,
+}
+
+impl<'a> CastMesh<'a> {
+    /// Build the caster of `mesh`.
+    ///
+    /// # Errors
+    /// [`RaycastError`] when the mesh cannot be ray cast.
+    pub fn new(mesh: &'a TriMesh) -> Result<Self, RaycastError> {
+        Ok(Self {
+            mesh,
+            caster: MeshCaster::new(mesh)?,
+        })
+    }
+}
 
 /// Result of [`seen_side_accuracy`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -56,10 +81,21 @@ pub fn seen_side_accuracy(
     recon: &TriMesh,
     tau: f64,
 ) -> Result<SeenSide, RaycastError> {
-    let t = MeshCaster::new(truth)?;
-    let r = MeshCaster::new(recon)?;
-    let Some((i0, i1, j0, j1)) = pixel_rect(camera, &Isometry3::identity(), &truth.aabb()) else {
-        return Ok(SeenSide { rays: 0, within: 0 });
+    let (truth, recon) = (CastMesh::new(truth)?, CastMesh::new(recon)?);
+    Ok(seen_side_accuracy_of(camera, &truth, &recon, tau))
+}
+
+/// [`seen_side_accuracy`] on meshes whose casters are built.
+pub fn seen_side_accuracy_of(
+    camera: &Camera,
+    truth: &CastMesh<'_>,
+    recon: &CastMesh<'_>,
+    tau: f64,
+) -> SeenSide {
+    let (t, r) = (&truth.caster, &recon.caster);
+    let Some((i0, i1, j0, j1)) = pixel_rect(camera, &Isometry3::identity(), &truth.mesh.aabb())
+    else {
+        return SeenSide { rays: 0, within: 0 };
     };
     let origin = Vec3::zeros();
     let counts = (j0..=j1)
@@ -83,10 +119,10 @@ pub fn seen_side_accuracy(
             c
         })
         .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-    Ok(SeenSide {
+    SeenSide {
         rays: counts.0,
         within: counts.1,
-    })
+    }
 }
 
 /// Result of [`points_outside`].
@@ -126,7 +162,19 @@ pub fn points_outside(
     sigma: impl Fn(f64) -> f64 + Sync,
     k: f64,
 ) -> Result<PointsOutside, RaycastError> {
-    let (truth, mesh) = (MeshCaster::new(truth)?, MeshCaster::new(mesh)?);
+    let (truth, mesh) = (CastMesh::new(truth)?, CastMesh::new(mesh)?);
+    Ok(points_outside_of(points, &truth, &mesh, sigma, k))
+}
+
+/// [`points_outside`] on meshes whose casters are built.
+pub fn points_outside_of(
+    points: &[Vec3],
+    truth: &CastMesh<'_>,
+    mesh: &CastMesh<'_>,
+    sigma: impl Fn(f64) -> f64 + Sync,
+    k: f64,
+) -> PointsOutside {
+    let (truth, mesh) = (&truth.caster, &mesh.caster);
     let per_point = |p: &Vec3| -> (usize, usize, f64) {
         let s = sigma(p.z).max(f64::MIN_POSITIVE);
         if !(p.iter().all(|c| c.is_finite()) && truth.distance(p) <= k * s) {
@@ -142,11 +190,11 @@ pub fn points_outside(
         .par_iter()
         .map(per_point)
         .reduce(|| (0, 0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2.max(b.2)));
-    Ok(PointsOutside {
+    PointsOutside {
         on_surface,
         outside,
         worst_sigmas,
-    })
+    }
 }
 
 /// Result of [`volume_iou`].
@@ -176,14 +224,26 @@ impl VolumeIou {
 /// [`RaycastError`] when either mesh cannot be ray cast, or `cells` is 0 or
 /// above 1000.
 pub fn volume_iou(a: &TriMesh, b: &TriMesh, cells: usize) -> Result<VolumeIou, RaycastError> {
+    volume_iou_of(&CastMesh::new(a)?, &CastMesh::new(b)?, cells)
+}
+
+/// [`volume_iou`] on meshes whose casters are built.
+///
+/// # Errors
+/// As [`volume_iou`], for the grid.
+pub fn volume_iou_of(
+    a: &CastMesh<'_>,
+    b: &CastMesh<'_>,
+    cells: usize,
+) -> Result<VolumeIou, RaycastError> {
     if cells == 0 || cells > 1000 {
         return Err(RaycastError::BadMesh(format!(
             "grid of {cells} cells: need 1..=1000"
         )));
     }
-    let (ca, cb) = (MeshCaster::new(a)?, MeshCaster::new(b)?);
-    let mut bb: Aabb = a.aabb();
-    b.vertices.iter().for_each(|v| bb.grow(v));
+    let (ca, cb) = (&a.caster, &b.caster);
+    let mut bb: Aabb = a.mesh.aabb();
+    b.mesh.vertices.iter().for_each(|v| bb.grow(v));
     let h = bb.longest_edge() / cells as f64;
     if !(h > 0.0 && h.is_finite()) {
         return Err(RaycastError::BadMesh("meshes without extent".into()));
