@@ -888,13 +888,15 @@ fn a_bag_written_by_replay_matches_the_rosbag2_fixtures_key_for_key() {
         .iter()
         .map(|t| (t.name.as_str(), t.message_count))
         .collect();
-    // One mesh, marker array and frame diagnostics per input frame (12).
+    // One mesh, marker array, frame diagnostics and fused model per input
+    // frame (12).
     assert_eq!(
         topics,
         [
             ("/synth/ellipsoid/points/membrane_diagnostics", 12),
             ("/synth/ellipsoid/points/mesh", 12),
             ("/synth/ellipsoid/points/mesh_markers", 12),
+            ("/synth/ellipsoid/points/model", 12),
         ]
     );
     if common::python_tools() {

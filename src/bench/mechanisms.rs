@@ -76,10 +76,9 @@ pub const MECHANISMS: [&str; 20] = [
     // Off by default ("none", null): switched on.
     "membrane.view.completion=mirror",
     "membrane.view.back={extent: 1.0}",
-    // The tracker's mechanisms (they act on the synth replays only); the
-    // fused model is off by default: switched on.
+    // The tracker's mechanisms (they act on the synth replays only).
     "pipeline.icp_min_inliers=null",
-    "pipeline.model={}",
+    "pipeline.model=null",
 ];
 
 /// The five figures of one configuration (mean F-scores).

@@ -40,12 +40,7 @@
 //! banana) and 0.361 → 0.426 on 8 others held out while tuning (other
 //! seeds, sizes 0.1–0.3 m, ranges 0.7–1.4 m, a bowl and a sphere); voxel
 //! 0.008 of the size (the earlier default) gave 0.366 on the 12, 0.015
-//! 0.424, 0.03 0.409. `pipeline.model` nevertheless stays off by default:
-//! with it the ROS 2 conformance client (`tests/python_client.rs`) failed
-//! 3 of 10 runs (the rigidly moved object's collision operations came as
-//! ADD, ADD, ADD, REMOVE instead of ADD, MOVE …, REMOVE, one collision
-//! sample lost), and none of 6 with the model's cloud not published; the
-//! cause is not established.
+//! 0.424, 0.03 0.409.
 
 pub mod views;
 pub mod voxels;

@@ -52,6 +52,18 @@ impl OutputKind {
             OutputKind::Markers | OutputKind::FrameDiagnostics | OutputKind::Model
         )
     }
+
+    /// The zenoh lane of this kind: collision objects go in the urgent lane
+    /// (a planning scene that misses an ADD never holds the object, and the
+    /// MOVEs that follow refer to nothing), everything else where rmw_zenoh
+    /// puts it.
+    #[cfg(feature = "zenoh")]
+    pub fn lane(self) -> crate::transport::Lane {
+        match self {
+            OutputKind::CollisionObjects => crate::transport::Lane::Urgent,
+            _ => crate::transport::Lane::Data,
+        }
+    }
 }
 
 /// One encoded output message.

@@ -552,7 +552,7 @@ async fn declare_stream(ctx: &StreamCtx) -> (Option<EntityToken>, Publishers) {
         let ty = tr.advertised(&ctx.backend.output_type(kind));
         match ctx
             .participant
-            .publisher(&out, &ty, ctx.cfg.output_qos_of(kind))
+            .publisher_in(&out, &ty, ctx.cfg.output_qos_of(kind), kind.lane())
             .await
         {
             Ok(p) => {

@@ -140,7 +140,7 @@ impl Default for PipelineConfig {
             score_samples: 10_000,
             score_visible_radius: 0.02,
             objects: objects::ObjectsConfig::default(),
-            model: None,
+            model: Some(crate::model::ModelConfig::default()),
         }
     }
 }

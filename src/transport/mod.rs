@@ -20,7 +20,7 @@ pub use attachment::{Attachment, AttachmentError};
 pub use keys::{KeyError, KeyMapper, KeyMode, RosType};
 pub use liveliness::{EntityKind, LivelinessError, Qos, Token};
 #[cfg(feature = "zenoh")]
-pub use session::{free_loopback_port, EntityToken, Participant, Received, RosPublisher};
+pub use session::{free_loopback_port, EntityToken, Lane, Participant, Received, RosPublisher};
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
