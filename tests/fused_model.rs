@@ -183,7 +183,9 @@ async fn the_node_publishes_the_fused_models_on_the_model_topic() {
     .unwrap();
     cfg.pipeline.model = Some(serde_json::from_str("{}").unwrap());
     let mut node_cfg = cfg.node.clone();
-    node_cfg.topics = vec![messages[0].topic.clone()];
+    // A pattern that also matches the node's own `{topic}/model` clouds
+    // (PointCloud2 like the input): they must not become input streams.
+    node_cfg.topics = vec![format!("{}/**", messages[0].topic)];
     let ty = RosType::new(PointCloud2::TYPE_NAME, PointCloud2::TYPE_HASH);
     let backend = std::sync::Arc::new(cfg.pipeline_backend().unwrap());
     let node = LoopbackNode::start(&node_cfg, backend).await.unwrap();
@@ -245,5 +247,11 @@ async fn the_node_publishes_the_fused_models_on_the_model_topic() {
         assert_eq!(labels, expected, "frame {k}: the objects' labels");
     }
     input.undeclare().await.unwrap();
-    node.stop().await.unwrap();
+    let summary = node.stop().await.unwrap();
+    let streams: Vec<&str> = summary.streams.iter().map(|s| s.topic.as_str()).collect();
+    assert_eq!(streams, [messages[0].topic.as_str()], "input streams");
+    assert!(
+        summary.own_outputs >= 1,
+        "the node's own model clouds were seen and ignored: {summary:?}"
+    );
 }

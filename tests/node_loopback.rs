@@ -70,6 +70,7 @@ impl TopicProcessor for TestProc {
                 level: Level::Ok,
                 message: "ok".into(),
                 quality: None,
+                model_bytes: None,
             }],
             ..FrameResult::default()
         }

@@ -7,6 +7,12 @@
 //! the node stopped without a panic (a panic in compute aborts the
 //! process). Here the healthy streams must also keep meshing, and
 //! `/diagnostics` must stay small although a new label arrives every frame.
+//!
+//! And a looped replay through the live node (`bench-node --bag`): the
+//! committed turning-mug sequence, looped, with the fused model on (the
+//! default): the node meshes it, takes none of its own `/model` clouds for
+//! an input, and reports in `/diagnostics` a fused model that never
+//! exceeds the cap the configuration states.
 #![allow(clippy::unwrap_used)]
 
 use std::process::Command;
@@ -60,4 +66,46 @@ fn healthy_streams_keep_meshing_and_every_hostile_input_is_counted() {
     assert!(statuses <= 1 + 7 * 64, "{statuses} statuses");
     let bytes = j["hostile"]["diagnostics_max_bytes"].as_u64().unwrap();
     assert!(bytes < 200_000, "/diagnostics grew to {bytes} bytes");
+}
+
+#[test]
+fn a_looped_replay_keeps_the_fused_model_under_its_cap() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("loop.json");
+    let bag = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/bags/synth_turn_mug.mcap"
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_sepmem"))
+        .args(["bench-node", "--bag", bag, "--streams", "1", "--rate", "10"])
+        .args([
+            "--duration",
+            "12",
+            "--warmup",
+            "2",
+            "--rss-every",
+            "2",
+            "--json",
+        ])
+        .arg(&json)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    eprintln!("{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "bench-node --bag: {:?}", out.status);
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    // 12 s at 10 Hz loops the 30-frame bag four times.
+    let meshed = j["healthy"][0]["meshed"].as_f64().unwrap();
+    assert!(meshed >= 0.5, "meshed {meshed}: {j}");
+    assert_eq!(j["input_streams"], 1, "{j}");
+    assert!(j["own_outputs"].as_u64().unwrap() > 0, "{j}");
+    // The cap stated in launch/sepmem.json5: max_voxels * 66 + max_views *
+    // 4 * view_side^2 at the defaults (60000, 12, 160).
+    let cap = 60_000 * 66 + 12 * 4 * 160 * 160;
+    let model = j["model_bytes_max"].as_u64().unwrap();
+    assert!(
+        model > 0 && model <= cap,
+        "fused model {model} bytes, cap {cap}"
+    );
 }

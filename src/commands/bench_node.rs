@@ -47,6 +47,12 @@ pub struct BenchNodeArgs {
     /// Points per cloud.
     #[arg(long, default_value_t = 20_000)]
     pub points: usize,
+    /// Loop the clouds of this rosbag2 bag (its first PointCloud2 topic, e.g.
+    /// a `sepmem synth` turning sequence) on every stream instead of the
+    /// synthetic ellipsoids (`--points` is then ignored): a looped replay
+    /// through the live node, for its memory over time.
+    #[arg(long)]
+    pub bag: Option<PathBuf>,
     /// Duration of the measurement (s).
     #[arg(long, default_value_t = 120.0)]
     pub duration: f64,
@@ -130,6 +136,28 @@ fn stream_frames(index: usize, points: usize, frames: usize) -> Result<Vec<Vec<u
     let encode = |c: &PointCloud| wire::encode(&encode_pointcloud2(c, header.clone()));
     let clouds = sepmem::bench::clouds::moving_ellipsoid(index, points, frames)?;
     Ok(clouds.iter().map(encode).collect::<Result<_, _>>()?)
+}
+
+/// The clouds of `bag`'s first PointCloud2 topic, in order.
+fn bag_frames(bag: &std::path::Path) -> Result<Vec<Vec<u8>>> {
+    let b =
+        sepmem::bag::Bag::open(bag).with_context(|| format!("opening bag {}", bag.display()))?;
+    let Some(topic) = b
+        .topics
+        .iter()
+        .find(|t| t.type_name == PointCloud2::TYPE_NAME)
+    else {
+        bail!("no {} topic in {}", PointCloud2::TYPE_NAME, bag.display());
+    };
+    let frames: Vec<Vec<u8>> = b
+        .read(&[topic.name.as_str()])?
+        .into_iter()
+        .map(|m| m.data)
+        .collect();
+    if frames.is_empty() {
+        bail!("no clouds on {} in {}", topic.name, bag.display());
+    }
+    Ok(frames)
 }
 
 /// The stamp of a CDR message whose first field is a `std_msgs/Header`.
@@ -282,13 +310,24 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
     node_cfg.topics = vec!["/bench/**".into()];
     node_cfg.transport.node_name = "sepmem_bench".into();
     let frames_per_stream = 30;
-    eprintln!(
-        "encoding {} × {frames_per_stream} clouds of {} points …",
-        args.streams, args.points
-    );
     let mut payloads = Vec::new();
-    for s in 0..args.streams {
-        payloads.push(stream_frames(s, args.points, frames_per_stream)?);
+    if let Some(bag) = &args.bag {
+        let frames = bag_frames(bag)?;
+        eprintln!(
+            "looping {} clouds of {} on {} streams …",
+            frames.len(),
+            bag.display(),
+            args.streams
+        );
+        payloads.resize(args.streams, frames);
+    } else {
+        eprintln!(
+            "encoding {} × {frames_per_stream} clouds of {} points …",
+            args.streams, args.points
+        );
+        for s in 0..args.streams {
+            payloads.push(stream_frames(s, args.points, frames_per_stream)?);
+        }
     }
     let backend = Arc::new(cfg.pipeline_backend()?);
     let hostile = args.hostile.then(|| Setup {
@@ -303,10 +342,7 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
     let args_rate = args.rate;
     rt.block_on(async move {
         let node = LoopbackNode::start(&node_cfg, backend).await?;
-        let diag = match hostile {
-            Some(_) => Some(soak::watch_diagnostics(&node, &node_cfg.outputs.diagnostics).await?),
-            None => None,
-        };
+        let diag = soak::watch_diagnostics(&node, &node_cfg.outputs.diagnostics).await?;
         let receipts = Arc::new(Mutex::new(Receipts::new(args.streams)?));
         let r2 = receipts.clone();
         let _sub = node
@@ -351,10 +387,13 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
         }
         tokio::time::sleep(Duration::from_millis(300)).await;
         println!(
-            "bench-node: {} streams × {} Hz × {} points for {} s (warm-up {} s), deadline {} ms, compute threads {}",
+            "bench-node: {} streams × {} Hz × {} for {} s (warm-up {} s), deadline {} ms, compute threads {}",
             args.streams,
             args_rate,
-            args.points,
+            args.bag.as_ref().map_or_else(
+                || format!("{} points", args.points),
+                |b| format!("the clouds of {}", b.display())
+            ),
             args.duration,
             args.warmup,
             cfg.pipeline.deadline_ms,
@@ -402,7 +441,7 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
             Some(h) => soak::spawn(&node, soak::streams(h.max_bytes, h.limit, h.healthy.clone())?, end).await?,
             None => Vec::new(),
         };
-        let rss = sample_rss(t0, end, args.rss_every, &receipts).await;
+        let rss = sample_rss(t0, end, args.rss_every, &receipts, &diag.1).await;
         let steal = steal_percent(cpu0, cpu_jiffies());
         let mut pubs = Vec::new();
         for t in tasks {
@@ -419,7 +458,7 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
             p.undeclare().await?;
         }
         let summary = node.stop().await?;
-        let seen = diag.as_ref().map(|(_, d)| d.lock().map(|d| d.clone()).unwrap_or_default());
+        let seen = diag.1.lock().map(|d| d.clone()).unwrap_or_default();
         let r = receipts.lock().map_err(|_| anyhow::anyhow!("the observer panicked"))?.clone();
         let published: Vec<u64> = published.iter().map(|p| p.load(Ordering::Relaxed)).collect();
         let mut figures = report(args, &cfg, &summary, &r, &published, &rss);
@@ -430,7 +469,15 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
             None => println!("CPU steal: unknown (no /proc/stat)"),
         }
         figures["steal_percent"] = serde_json::json!(steal);
-        let verdict = seen.map(|d| hostile_verdict(&d, &sent));
+        figures["model_bytes_max"] = serde_json::json!(seen.model_bytes_max);
+        if seen.model_bytes_max > 0 {
+            println!(
+                "fused model: largest one object's {:.1} KiB (cap {:.1} KiB)",
+                seen.model_bytes_max as f64 / 1024.0,
+                cfg.pipeline.model.as_ref().map_or(0.0, |m| m.max_bytes() as f64 / 1024.0)
+            );
+        }
+        let verdict = hostile.is_some().then(|| hostile_verdict(&seen, &sent));
         if let Some(path) = &args.json {
             let mut j = figures;
             if let Some((v, _)) = &verdict {
@@ -452,6 +499,7 @@ async fn sample_rss(
     end: i64,
     every_s: f64,
     receipts: &Mutex<Receipts>,
+    diag: &Mutex<soak::DiagSeen>,
 ) -> Vec<(f64, f64)> {
     let mut rss = vec![(0.0, rss_mib().unwrap_or(f64::NAN))];
     let every = Duration::from_secs_f64(every_s.max(0.5));
@@ -475,8 +523,14 @@ async fn sample_rss(
         let heap = heap_mib().map_or_else(String::new, |(used, all)| {
             format!("  heap in use {used:7.1} of {all:7.1} MiB")
         });
+        let model = diag.lock().map(|d| d.model_bytes_now).unwrap_or_default();
+        let model = if model > 0 {
+            format!("  fused models {:.1} KiB", model as f64 / 1024.0)
+        } else {
+            String::new()
+        };
         println!(
-            "  t={t:6.1} s  rss {m:7.1} MiB{heap}  meshes received {n}  healthy grid cells {:.0}, vertices {:.0}{steal}",
+            "  t={t:6.1} s  rss {m:7.1} MiB{heap}{model}  meshes received {n}  healthy grid cells {:.0}, vertices {:.0}{steal}",
             per(cells),
             per(verts)
         );
@@ -598,6 +652,7 @@ fn report(
         "rss_mib": rss.iter().map(|(t, m)| serde_json::json!([t, m])).collect::<Vec<_>>(),
         "rss_ref": {"t_s": ref_t, "mib": rss_ref}, "rss_end_mib": rss_last,
         "reasons": summary.reasons,
+        "input_streams": summary.streams.len(), "own_outputs": summary.own_outputs,
         "clean_shutdown": summary.clean_shutdown,
     })
 }

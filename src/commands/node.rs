@@ -55,8 +55,8 @@ pub fn print_summary(s: &NodeSummary) {
         );
     }
     println!(
-        "ignored samples: {} foreign keys, {} other shard, {} over capacity, {} bad attachments; clean shutdown: {}",
-        s.foreign_keys, s.other_shard, s.over_capacity, s.bad_attachments, s.clean_shutdown
+        "ignored samples: {} foreign keys, {} own outputs, {} other shard, {} over capacity, {} bad attachments; clean shutdown: {}",
+        s.foreign_keys, s.own_outputs, s.other_shard, s.over_capacity, s.bad_attachments, s.clean_shutdown
     );
 }
 

@@ -155,6 +155,8 @@ struct StreamSummary {
     /// frame): how many reached the mean F of the frame's other cold
     /// references within 0.01, of how many.
     cold_vs_cold: (usize, usize),
+    /// Most bytes the stream's fused model held after a frame.
+    model_bytes_max: Option<usize>,
 }
 
 const POINTCLOUD2: &str = "sensor_msgs/msg/PointCloud2";
@@ -324,6 +326,7 @@ pub fn run_opts(
                         r.latency_ms
                     );
                     let entry = per_stream.entry(id.clone()).or_default();
+                    entry.model_bytes_max = entry.model_bytes_max.max(r.model_bytes);
                     if let Some(sc) = &score {
                         entry.scores.push(*sc);
                         line += &format!(
@@ -464,6 +467,13 @@ pub fn run_opts(
         },
     );
     for (id, st) in &per_stream {
+        if let (Some(b), Some(m)) = (st.model_bytes_max, &p.model) {
+            println!(
+                "model {id}: at most {:.1} KiB after a frame (cap {:.1} KiB: pipeline.model's max_voxels, max_views, view_side)",
+                b as f64 / 1024.0,
+                m.max_bytes() as f64 / 1024.0
+            );
+        }
         if !st.scores.is_empty() {
             let f: Vec<f64> = st.scores.iter().map(|s| s.fscore).collect();
             let pick = |g: fn(&FrameScore) -> f64| st.scores.iter().map(g).collect::<Vec<_>>();

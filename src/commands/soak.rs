@@ -251,6 +251,11 @@ pub struct DiagSeen {
     pub node_values: BTreeMap<String, String>,
     /// Per hostile topic, the highest level seen and a message at it.
     pub worst: BTreeMap<String, (u8, String)>,
+    /// The fused models' bytes (`model_bytes`) summed over the objects of
+    /// the last array.
+    pub model_bytes_now: usize,
+    /// The largest one object's fused model reported over the run.
+    pub model_bytes_max: usize,
 }
 
 /// Watch the node's `/diagnostics`.
@@ -276,6 +281,15 @@ pub async fn watch_diagnostics(
                 seen.arrays += 1;
                 seen.max_bytes = seen.max_bytes.max(s.payload.len());
                 seen.max_statuses = seen.max_statuses.max(a.status.len());
+                let models: Vec<usize> = a
+                    .status
+                    .iter()
+                    .flat_map(|st| &st.values)
+                    .filter(|kv| kv.key == "model_bytes")
+                    .filter_map(|kv| kv.value.parse().ok())
+                    .collect();
+                seen.model_bytes_now = models.iter().sum();
+                seen.model_bytes_max = models.into_iter().fold(seen.model_bytes_max, usize::max);
                 for st in &a.status {
                     if st.name.ends_with(": node") {
                         seen.node_values = st

@@ -111,6 +111,8 @@ pub struct ObjectReport {
     /// Verdict on the published surface (e.g. `fitted`, `held`), if the
     /// backend gives one.
     pub quality: Option<&'static str>,
+    /// Bytes of the object's fused model (`pipeline.model`), if it has one.
+    pub model_bytes: Option<usize>,
 }
 
 /// The result of processing one frame (its outputs went to the

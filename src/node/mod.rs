@@ -96,6 +96,26 @@ pub struct TransientLocal {
 }
 
 impl OutputTopics {
+    /// Whether `topic` is an output of a node with these templates
+    /// subscribed to `inputs`: some template's `{topic}` filled with a
+    /// topic `inputs` match (e.g. `/seg/cam/points/model` under `/seg/**`,
+    /// a `sensor_msgs/PointCloud2` like the inputs). Such a node (this one,
+    /// or another shard) must never take it for an input: bench-node's
+    /// looped replay with the model on fed every stream's `/model` back in
+    /// as a second stream.
+    pub fn is_output(&self, topic: &str, inputs: &[String]) -> bool {
+        OutputKind::ALL
+            .iter()
+            .filter_map(|&k| self.template(k))
+            .any(|t| match t.split_once("{topic}") {
+                Some((pre, post)) => topic
+                    .strip_prefix(pre)
+                    .and_then(|r| r.strip_suffix(post))
+                    .is_some_and(|input| inputs.iter().any(|p| topic_matches(p, input))),
+                None => t == topic,
+            })
+    }
+
     /// The template for one output kind (`None`: that output is off).
     pub fn template(&self, kind: OutputKind) -> Option<&str> {
         match kind {
@@ -285,5 +305,20 @@ mod tests {
         assert!(!topic_matches("/seg/**", "/other/points"));
         assert!(topic_matches("/exact", "/exact/"));
         assert!(!topic_matches("/exact", "/exactly"));
+    }
+
+    #[test]
+    fn the_node_never_takes_its_own_outputs_for_inputs() {
+        let outputs = crate::config::Config::defaults().unwrap().node.outputs;
+        let inputs = vec!["/seg/**".to_string()];
+        // The default templates under the default input pattern.
+        assert!(outputs.is_output("/seg/cam/points/model", &inputs));
+        assert!(outputs.is_output("/seg/cam/points/mesh", &inputs));
+        assert!(!outputs.is_output("/seg/cam/points", &inputs));
+        // The would-be input must itself be one: `/other/x` is not.
+        assert!(!outputs.is_output("/other/x/model", &inputs));
+        let exact = vec!["/cam/points".to_string()];
+        assert!(outputs.is_output("/cam/points/model", &exact));
+        assert!(!outputs.is_output("/cam/other/model", &exact));
     }
 }

@@ -177,6 +177,7 @@ impl EngineProcessor {
                 shown.verdict.as_str(),
             ),
             quality: Some(shown.quality.as_str()),
+            model_bytes: r.model_bytes,
         });
     }
 

@@ -233,6 +233,7 @@ pub fn run(
             if subscribed.contains_key(&topic)
                 || !types.contains(&input_type)
                 || !cfg.topics.iter().any(|p| topic_matches(p, &topic))
+                || cfg.outputs.is_output(&topic, &cfg.topics)
                 || !cfg.shard.owns(&topic)
                 || lock(&streams).len() >= cfg.max_streams
             {

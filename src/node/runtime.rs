@@ -132,6 +132,7 @@ struct Stream {
 #[derive(Debug, Default)]
 struct Ignored {
     foreign_keys: AtomicU64,
+    own_outputs: AtomicU64,
     other_shard: AtomicU64,
     over_capacity: AtomicU64,
     bad_attachments: AtomicU64,
@@ -184,6 +185,9 @@ pub struct NodeSummary {
     pub streams: Vec<StreamSummary>,
     /// Samples whose key was not a topic of the key mode.
     pub foreign_keys: u64,
+    /// Samples on a topic that is an output of this node's templates
+    /// ([`super::OutputTopics::is_output`]).
+    pub own_outputs: u64,
     /// Samples of streams owned by another shard.
     pub other_shard: u64,
     /// Samples refused because `max_streams` streams existed.
@@ -361,6 +365,10 @@ fn on_sample(shared: &Shared, r: Received, deadline: Duration) {
             return;
         }
     };
+    if shared.cfg.outputs.is_output(&topic, &shared.cfg.topics) {
+        shared.ignored.own_outputs.fetch_add(1, Ordering::Relaxed);
+        return;
+    }
     if !shared.cfg.shard.owns(&topic) {
         shared.ignored.other_shard.fetch_add(1, Ordering::Relaxed);
         return;
@@ -854,6 +862,7 @@ fn node_status(
     ];
     let ignored = [
         ("foreign_keys", &ig.foreign_keys),
+        ("own_outputs", &ig.own_outputs),
         ("other_shard", &ig.other_shard),
         ("over_capacity", &ig.over_capacity),
         ("bad_attachments", &ig.bad_attachments),
@@ -963,6 +972,9 @@ fn statuses(
                 ("cold".into(), o.cold.to_string()),
                 ("quality".into(), o.last.quality.unwrap_or("").to_string()),
             ];
+            if let Some(b) = o.last.model_bytes {
+                values.push(("model_bytes".into(), b.to_string()));
+            }
             values.extend(stream_values(topic, &st));
             let level = if base_level == Level::Stale {
                 Level::Stale
@@ -1028,6 +1040,7 @@ fn summarize(
     NodeSummary {
         streams,
         foreign_keys: ig.foreign_keys.load(Ordering::Relaxed),
+        own_outputs: ig.own_outputs.load(Ordering::Relaxed),
         other_shard: ig.other_shard.load(Ordering::Relaxed),
         over_capacity: ig.over_capacity.load(Ordering::Relaxed),
         bad_attachments: ig.bad_attachments.load(Ordering::Relaxed),

@@ -301,6 +301,9 @@ pub struct FrameResult {
     /// The object's fused model after this frame, in this frame's cloud
     /// frame (one point per voxel; `None` when `pipeline.model` is null).
     pub model: Option<Vec<Vec3>>,
+    /// Bytes the object's fused model holds after this frame (never more
+    /// than [`crate::model::ModelConfig::max_bytes`]; `None` without a model).
+    pub model_bytes: Option<usize>,
 }
 
 /// Running counts of a stream.
@@ -628,6 +631,7 @@ impl Tracker {
             motion,
             latency_ms: start.elapsed().as_secs_f64() * 1e3,
             model: self.fused.as_ref().map(|f| f.model.points_in(&f.pose)),
+            model_bytes: self.fused.as_ref().map(|f| f.model.bytes()),
         })
     }
 
