@@ -41,7 +41,7 @@ pub enum ShapeError {
         min: usize,
     },
     /// An unknown shape name was requested.
-    #[error("unknown procedural shape `{0}` (known: sphere, ellipsoid, rounded_box, bottle, bowl, torus, mug)")]
+    #[error("unknown procedural shape `{0}` (known: sphere, ellipsoid, rounded_box, bottle, bowl, torus, mug, capsule, bent_tube)")]
     Unknown(String),
 }
 
@@ -73,6 +73,10 @@ pub const NAMES: [&str; 7] = [
     "mug",
 ];
 
+/// Further procedural shapes for the robot's-view sequences (`sepmem synth`;
+/// issue 20 names a capsule and a banana-like bent tube), not in Table 1.
+pub const SEQUENCE_NAMES: [&str; 2] = ["capsule", "bent_tube"];
+
 /// Build the shape called `name` at tessellation resolution `res` (roughly
 /// the number of segments around the shape; 96 gives ~50k triangles).
 ///
@@ -88,6 +92,8 @@ pub fn by_name(name: &str, res: usize) -> Result<Shape, ShapeError> {
         "bowl" => bowl(res),
         "torus" => torus(res),
         "mug" => mug(res),
+        "capsule" => capsule(res),
+        "bent_tube" => bent_tube(res),
         other => Err(ShapeError::Unknown(other.to_string())),
     }
 }
@@ -482,6 +488,80 @@ pub fn bottle(res: usize) -> Result<Shape, ShapeError> {
     Ok(finish("bottle", mesh, 0, Some(vol), Some(area), 1.0))
 }
 
+/// Capsule (height 1): a cylinder of radius 0.2 and length 0.6 between two
+/// hemispheres, as a surface of revolution.
+///
+/// # Errors
+/// [`ShapeError::Resolution`] when `res < 8`.
+pub fn capsule(res: usize) -> Result<Shape, ShapeError> {
+    check_res("capsule", res, 8)?;
+    let (r, len) = (0.2f64, 0.6f64);
+    let s = res.max(8);
+    let mut p = vec![(0.0, 0.0)];
+    arc(&mut p, (0.0, r), r, -PI / 2.0, 0.0, s / 4);
+    line(&mut p, (r, r + len), s / 2);
+    arc(&mut p, (0.0, r + len), r, 0.0, PI / 2.0, s / 4);
+    let mesh = revolve(&p, res);
+    let volume = PI * r * r * len + 4.0 / 3.0 * PI * r.powi(3);
+    let area = 2.0 * PI * r * len + 4.0 * PI * r * r;
+    Ok(finish(
+        "capsule",
+        mesh,
+        0,
+        Some(volume),
+        Some(area),
+        len + 2.0 * r,
+    ))
+}
+
+/// The bent tube's arc radius, tube radius and half angle.
+const BENT_TUBE: (f64, f64, f64) = (0.5, 0.1, 50.0 * PI / 180.0);
+
+/// Signed distance to the bent tube (negative inside): a ball of radius
+/// 0.1 swept along a circular arc of radius 0.5 over 100° in the xz-plane
+/// (centre at the origin, bowing toward −z), round-ended like a banana.
+fn bent_tube_field(p: Vec3) -> f64 {
+    let (big, tube, half) = BENT_TUBE;
+    let phi = p.x.atan2(-p.z);
+    let d = if phi.abs() <= half {
+        let rho = p.x.hypot(p.z);
+        (rho - big).hypot(p.y)
+    } else {
+        let end = Vec3::new(big * half.sin() * phi.signum(), 0.0, -big * half.cos());
+        (p - end).norm()
+    };
+    d - tube
+}
+
+/// Banana-like bent tube (see [`bent_tube_field`]), extracted by
+/// [`marching_tetrahedra`] with `res` cells along the longest edge. Its
+/// volume and area are those of the swept ball (Pappus: the tube's section
+/// times the arc's length, plus one ball).
+///
+/// # Errors
+/// [`ShapeError::Resolution`] when `res < 24` (the tube must span cells).
+pub fn bent_tube(res: usize) -> Result<Shape, ShapeError> {
+    check_res("bent_tube", res, 24)?;
+    let (big, tube, half) = BENT_TUBE;
+    let pad = tube * 1.2;
+    let lo = Vec3::new(-big * half.sin() - pad, -pad, -big - pad);
+    let hi = Vec3::new(big * half.sin() + pad, pad, -big * half.cos() + pad);
+    let cell = (hi - lo).max() / res as f64;
+    let mesh = marching_tetrahedra(bent_tube_field, lo, hi, cell);
+    let arc = 2.0 * half * big;
+    let volume = PI * tube * tube * arc + 4.0 / 3.0 * PI * tube.powi(3);
+    let area = 2.0 * PI * tube * arc + 4.0 * PI * tube * tube;
+    let longest = 2.0 * (big * half.sin() + tube);
+    Ok(finish(
+        "bent_tube",
+        mesh,
+        0,
+        Some(volume),
+        Some(area),
+        longest,
+    ))
+}
+
 /// Thick-walled hemispherical bowl: outer wall radius 0.5, inner wall radius
 /// 0.42, joined at the rim by a half torus of tube radius 0.04. A closed
 /// solid, strongly concave (the cavity opens upward).
@@ -703,9 +783,18 @@ mod tests {
         (a - b).abs() / b.abs()
     }
 
+    /// Table 1's shapes and the sequences' own.
+    fn every(res: usize) -> Vec<Shape> {
+        NAMES
+            .iter()
+            .chain(&SEQUENCE_NAMES)
+            .map(|n| by_name(n, res).unwrap())
+            .collect()
+    }
+
     #[test]
     fn every_shape_is_closed_oriented_normalised_with_expected_genus() {
-        for s in all(64).unwrap() {
+        for s in every(64) {
             let topo = s.mesh.topology();
             assert!(topo.is_watertight(), "{}: {topo:?}", s.name);
             assert!(s.mesh.signed_volume() > 0.0, "{}", s.name);
@@ -719,7 +808,7 @@ mod tests {
 
     #[test]
     fn analytic_volume_and_area_match_the_tessellation() {
-        for s in all(96).unwrap() {
+        for s in every(96) {
             if let Some(v) = s.volume {
                 let got = s.mesh.signed_volume();
                 assert!(rel(got, v) < 0.01, "{} volume {got} vs {v}", s.name);

@@ -20,7 +20,8 @@ pub struct SynthArgs {
     #[arg(short, long)]
     out: PathBuf,
     /// Objects, comma-separated: procedural shapes (sphere, ellipsoid,
-    /// rounded_box, bottle, bowl, torus, mug) or mesh file paths (PLY/OBJ).
+    /// rounded_box, bottle, bowl, torus, mug, capsule, bent_tube) or mesh
+    /// file paths (PLY/OBJ).
     #[arg(long, value_delimiter = ',', default_value = "ellipsoid")]
     shapes: Vec<String>,
     /// Number of frames.

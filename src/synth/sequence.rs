@@ -292,15 +292,16 @@ fn shape_mesh(shape: &str, res: usize) -> Result<TriMesh, SequenceError> {
         name: shape.to_string(),
         reason,
     };
-    if crate::shapes::NAMES.contains(&shape) {
+    if crate::shapes::NAMES.contains(&shape) || crate::shapes::SEQUENCE_NAMES.contains(&shape) {
         return crate::shapes::by_name(shape, res)
             .map(|s| s.mesh)
             .map_err(|e| bad(e.to_string()));
     }
     if !Path::new(shape).is_file() {
         return Err(bad(format!(
-            "neither a procedural shape ({}) nor a mesh file",
-            crate::shapes::NAMES.join(", ")
+            "neither a procedural shape ({}, {}) nor a mesh file",
+            crate::shapes::NAMES.join(", "),
+            crate::shapes::SEQUENCE_NAMES.join(", ")
         )));
     }
     let loaded = crate::io::load_mesh(shape).map_err(|e| bad(e.to_string()))?;
