@@ -160,6 +160,29 @@ fn bag_frames(bag: &std::path::Path) -> Result<Vec<Vec<u8>>> {
     Ok(frames)
 }
 
+/// Each stream's looped clouds: the bag's (`--bag`), or 30 synthetic
+/// ellipsoids of `--points` points per stream.
+fn stream_payloads(args: &BenchNodeArgs) -> Result<Vec<Vec<Vec<u8>>>> {
+    if let Some(bag) = &args.bag {
+        let frames = bag_frames(bag)?;
+        eprintln!(
+            "looping {} clouds of {} on {} streams …",
+            frames.len(),
+            bag.display(),
+            args.streams
+        );
+        return Ok(vec![frames; args.streams]);
+    }
+    let frames_per_stream = 30;
+    eprintln!(
+        "encoding {} × {frames_per_stream} clouds of {} points …",
+        args.streams, args.points
+    );
+    (0..args.streams)
+        .map(|s| stream_frames(s, args.points, frames_per_stream))
+        .collect()
+}
+
 /// The stamp of a CDR message whose first field is a `std_msgs/Header`.
 fn stamp_of(cdr: &[u8]) -> Option<i64> {
     let sec = i32::from_le_bytes(cdr.get(4..8)?.try_into().ok()?);
@@ -309,26 +332,7 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
     let mut node_cfg = cfg.node.clone();
     node_cfg.topics = vec!["/bench/**".into()];
     node_cfg.transport.node_name = "sepmem_bench".into();
-    let frames_per_stream = 30;
-    let mut payloads = Vec::new();
-    if let Some(bag) = &args.bag {
-        let frames = bag_frames(bag)?;
-        eprintln!(
-            "looping {} clouds of {} on {} streams …",
-            frames.len(),
-            bag.display(),
-            args.streams
-        );
-        payloads.resize(args.streams, frames);
-    } else {
-        eprintln!(
-            "encoding {} × {frames_per_stream} clouds of {} points …",
-            args.streams, args.points
-        );
-        for s in 0..args.streams {
-            payloads.push(stream_frames(s, args.points, frames_per_stream)?);
-        }
-    }
+    let payloads = stream_payloads(args)?;
     let backend = Arc::new(cfg.pipeline_backend()?);
     let hostile = args.hostile.then(|| Setup {
         max_bytes: cfg.wire.max_bytes,
