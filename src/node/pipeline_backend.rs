@@ -232,9 +232,9 @@ impl EngineProcessor {
         out.encode(OutputKind::Markers, &markers);
         self.collision_objects(frame, out);
         // The fused models last, after the collision objects MoveIt
-        // depends on: the least urgent output. (With the model sent before
-        // them, the ROS 2 conformance client, tests/python_client.rs,
-        // failed 2 of 4 runs; after them 1 of 6.)
+        // depends on: the least urgent output. (Collision objects also
+        // travel in their own zenoh lane, `OutputKind::lane`: in the shared
+        // one, a loaded link dropped them behind the marker arrays.)
         if self.engine.pipeline.model.is_some() {
             let label = &self.engine.pipeline.label_channel;
             if let Some(m) = outputs::model_cloud(&frame.results(), header, label) {
