@@ -839,6 +839,12 @@ fn every_committed_sepmem_bag_holds_metadata_that_rosbag2_reads() {
     assert_eq!(
         names,
         [
+            "tests/data/bags/robot_view/orbit_bent_tube.mcap",
+            "tests/data/bags/robot_view/swap.mcap",
+            "tests/data/bags/robot_view/turn_bent_tube.mcap",
+            "tests/data/bags/robot_view/turn_capsule.mcap",
+            "tests/data/bags/robot_view/turn_rounded_box.mcap",
+            "tests/data/bags/robot_view/turn_ycb_banana.mcap",
             "tests/data/bags/synth_ellipsoid.mcap",
             "tests/data/bags/synth_turn_mug.mcap",
             "tests/data/bags/synth_two_labelled.mcap",

@@ -330,8 +330,26 @@ fn every_warm_frame_of_a_20000_point_sequence_reaches_the_cold_f_score_of_its_fr
     };
     sepmem::synth::sequence::write_sequence(&spec, &path, |_| {}).unwrap();
     let bag = Bag::open(&path).unwrap();
-    let cfg = config(&["pipeline.deadline_ms=0", "membrane.step.threads=1"]);
-    let frames = sepmem::eval::replay_scored(&bag, &cfg, 1).unwrap();
+    // The warm start against a cold start on the same input: the frame's
+    // own points (`pipeline.model=null`). With the fused model the warm
+    // frame evolves on other points than the cold reference; it must
+    // still not fall behind it on the whole (below).
+    let off = warm_vs_cold(&bag, "pipeline.model=null");
+    assert!(off.iter().all(|&d| d <= 0.01), "{off:.3?}");
+    // Measured with the model: dF mean -0.023, largest -0.000.
+    let on = warm_vs_cold(&bag, "pipeline.model={}");
+    let mean = on.iter().sum::<f64>() / on.len() as f64;
+    assert!(mean <= 0.0, "{on:.3?}");
+    assert!(on.iter().all(|&d| d <= 0.03), "{on:.3?}");
+}
+
+/// dF = F_cold − F_warm of every warm frame of `bag` (deterministic, one
+/// search thread, `set`), after checking that each has at least 12 000
+/// points, is warm after the first, and took at most a quarter of the
+/// cold reference's iterations.
+fn warm_vs_cold(bag: &Bag, set: &str) -> Vec<f64> {
+    let cfg = config(&["pipeline.deadline_ms=0", "membrane.step.threads=1", set]);
+    let frames = sepmem::eval::replay_scored(bag, &cfg, 1).unwrap();
     assert_eq!(frames.len(), 20);
     let mut dfs = Vec::new();
     for f in &frames {
@@ -349,14 +367,16 @@ fn every_warm_frame_of_a_20000_point_sequence_reaches_the_cold_f_score_of_its_fr
         };
         assert!(
             4 * f.result.iterations <= cold_it,
-            "frame {}",
-            f.result.frame
+            "{set} frame {}: {} warm iterations ({}), {cold_it} cold",
+            f.result.frame,
+            f.result.iterations,
+            f.result.reason
         );
         dfs.push(cold.unwrap().fscore - f.score.unwrap().fscore);
     }
-    eprintln!("dF = F_cold - F_warm per warm frame: {dfs:.3?}");
+    eprintln!("{set}: dF = F_cold - F_warm per warm frame: {dfs:.3?}");
     assert_eq!(dfs.len(), 19, "every frame after the first is warm");
-    assert!(dfs.iter().all(|&d| d <= 0.01), "{dfs:.3?}");
+    dfs
 }
 
 #[test]

@@ -36,7 +36,10 @@ use std::time::Instant;
 const STRETCH_RINGS: usize = 16;
 
 /// The per-sample search over prepared points.
-fn stepper<'a>(prep: &'a Prepared, cfg: &'a MembraneConfig) -> Result<Stepper<'a>, MembraneError> {
+fn stepper<'a>(
+    prep: &'a Prepared<'_>,
+    cfg: &'a MembraneConfig,
+) -> Result<Stepper<'a>, MembraneError> {
     let delta = match (cfg.prepare.search_delta, prep.spacing.as_deref()) {
         (SearchDelta::Local, _) => Delta::Local(&prep.d_used),
         // The mean of the per-point spacing over the cuboid's points (membrane/spacing.rs).
@@ -54,6 +57,7 @@ fn stepper<'a>(prep: &'a Prepared, cfg: &'a MembraneConfig) -> Result<Stepper<'a
         delta: prep.delta,
         outside: prep.outside.as_ref(),
         view: prep.view.as_ref(),
+        free: prep.free,
         cross_max: cfg.step.cross_max * prep.scale,
         center: prep.points.iter().sum::<Vec3>() / prep.points.len() as f64,
         reach: prep.scale,
@@ -81,7 +85,7 @@ struct Buffers {
 /// 1 = y, 2 = z; `None`: the configured axis), drawing fit systems from
 /// `fits`.
 pub(crate) fn evolve(
-    prep: &Prepared,
+    prep: &Prepared<'_>,
     cfg: &MembraneConfig,
     budget: &Budget,
     warm: Option<&WarmStart>,
@@ -186,7 +190,7 @@ pub(crate) fn evolve(
 /// then, for a whole object whose rings stretched, redistribute its samples
 /// along them (see the module docs).
 fn move_and_refit(
-    prep: &Prepared,
+    prep: &Prepared<'_>,
     cfg: &MembraneConfig,
     warm: bool,
     surface: &mut ClosedSurface,
@@ -253,7 +257,7 @@ struct Evolved<'a> {
 /// a sub-δ move): its η* are reused; the surface is searched afresh only
 /// when the grid changed after it (or no iteration ran).
 fn finish(
-    prep: &Prepared,
+    prep: &Prepared<'_>,
     stepper: &Stepper<'_>,
     fits: &mut Fits<'_>,
     done: Evolved<'_>,

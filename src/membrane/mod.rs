@@ -357,7 +357,25 @@ impl Membrane {
         budget: &Budget,
         start: &Start,
     ) -> Result<Reconstruction, MembraneError> {
-        let run = || pole::reconstruct(cloud, &self.cfg, &self.fits, budget, start.warm());
+        self.reconstruct_seen(cloud, budget, start, None)
+    }
+
+    /// [`Self::reconstruct`] of a cloud fused from several views, given
+    /// the free space those views saw (`free`, in the cloud's frame): the
+    /// inward force then acts only where some view saw through, as it does
+    /// for a single view ([`view::FreeSpace`]). `None` is
+    /// [`Self::reconstruct`].
+    ///
+    /// # Errors
+    /// As [`Self::reconstruct`].
+    pub fn reconstruct_seen(
+        &self,
+        cloud: &PointCloud,
+        budget: &Budget,
+        start: &Start,
+        free: Option<&dyn view::FreeSpace>,
+    ) -> Result<Reconstruction, MembraneError> {
+        let run = || pole::reconstruct(cloud, &self.cfg, &self.fits, budget, start.warm(), free);
         match &self.pool {
             None => run(),
             Some(pool) => pool.install(run),

@@ -14,6 +14,7 @@ use super::evolve::evolve;
 use super::fit::{FitCache, Fits};
 use super::init::quantile_bounds;
 use super::prepare::prepare;
+use super::view::FreeSpace;
 use super::{Budget, MembraneError, Reconstruction, StopReason, WarmStart};
 use crate::cloud::{PointCloud, Vec3};
 use crate::mesh::TriMesh;
@@ -32,9 +33,10 @@ pub(crate) fn reconstruct(
     cache: &FitCache,
     budget: &Budget,
     warm: Option<&WarmStart>,
+    free: Option<&dyn FreeSpace>,
 ) -> Result<Reconstruction, MembraneError> {
     let t0 = Instant::now();
-    let prep = prepare(cloud, cfg)?;
+    let prep = prepare(cloud, cfg, free)?;
     let alpha = if warm.is_some() {
         cfg.fit.alpha_warm
     } else {
@@ -66,6 +68,7 @@ pub(crate) fn reconstruct(
     if init.pole_axis_candidates <= 1
         || warm.is_some()
         || prep.is_single_view()
+        || prep.free.is_some()
         || !within_budget(&first)
     {
         return Ok(first);

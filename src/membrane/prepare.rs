@@ -52,7 +52,7 @@ pub const SEARCH_CELL_DELTA: f64 = 2.5;
 const DENSITY_ATTRIBUTE_RADIUS: f64 = 2.0;
 
 /// The prepared points of one reconstruction.
-pub(crate) struct Prepared {
+pub(crate) struct Prepared<'a> {
     pub(crate) counts: PointCounts,
     /// The used points (finite, thinned, outlier-filtered, plus a single
     /// view's completion).
@@ -66,6 +66,8 @@ pub(crate) struct Prepared {
     /// Longest bounding-box edge of the used points.
     pub(crate) scale: f64,
     pub(crate) view: Option<view::ViewBuffer>,
+    /// The free space of the views a fused cloud was made from.
+    pub(crate) free: Option<&'a dyn view::FreeSpace>,
     pub(crate) index: SpatialIndex,
     pub(crate) attributes: Option<AttributeSet>,
     pub(crate) outside: Option<OutsideGrid>,
@@ -83,8 +85,11 @@ pub(crate) struct PointCounts {
     pub(crate) completed: usize,
 }
 
-impl Prepared {
-    /// Whether the cloud was taken as a single depth view.
+impl Prepared<'_> {
+    /// Whether the cloud was taken as a single depth view (a fused cloud
+    /// with its views' free space, `free`, is not: it is seen from
+    /// several sides, but like a single view it is partial, and the pole
+    /// axes are not tried in turn for it).
     pub(crate) fn is_single_view(&self) -> bool {
         self.view.is_some()
     }
@@ -187,7 +192,12 @@ fn search_grid(
 }
 
 /// Prepare `cloud` (see the module docs).
-pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepared, MembraneError> {
+/// `free`: the free space of the views a fused cloud was made from.
+pub(crate) fn prepare<'a>(
+    cloud: &PointCloud,
+    cfg: &MembraneConfig,
+    free: Option<&'a dyn view::FreeSpace>,
+) -> Result<Prepared<'a>, MembraneError> {
     let t_start = Instant::now();
     let points_in = cloud.len();
     let p = &cfg.prepare;
@@ -222,8 +232,16 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
     let median = quantile(&mut d_order, 0.5, scale);
     // Single views: the viewpoint, its z-buffer, the bound on the unseen
     // side's depth and its mirrored completion (membrane/view.rs).
-    let mut view = view::resolve(cfg.view.viewpoint, &points, median);
-    let delta = if view.is_some() {
+    // A fused cloud (given its views' free space) is never taken for one
+    // view by the "auto" detection, which would otherwise flip between the
+    // two treatments from frame to frame as its second layer fills in.
+    let mut view = match (cfg.view.viewpoint, free) {
+        (view::Viewpoint::Mode(view::ViewMode::Auto), Some(_)) => None,
+        (viewpoint, _) => view::resolve(viewpoint, &points, median),
+    };
+    // A single view, and a fused cloud with its views' free space, keep
+    // the median (membrane.prepare.delta_quantile's note).
+    let delta = if view.is_some() || free.is_some() {
         median
     } else {
         (quantile(&mut d_order, p.delta_quantile, scale) * p.delta_scale).max(1e-9 * scale)
@@ -252,7 +270,12 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
     let order_free =
         attributes.is_none() && spacing.is_none() && p.search_delta == SearchDelta::Global;
     let index = search_grid(&points, order_free, delta)?;
-    let outside = outside_grid(cfg, &points, spacing.as_deref(), delta, view.as_ref());
+    let seen = match (&view, free) {
+        (Some(vb), _) => Seen::View(vb),
+        (None, Some(f)) => Seen::Views(f),
+        (None, None) => Seen::AllAround,
+    };
+    let outside = outside_grid(cfg, &points, spacing.as_deref(), delta, seen);
     Ok(Prepared {
         counts: PointCounts {
             input: points_in,
@@ -268,6 +291,7 @@ pub(crate) fn prepare(cloud: &PointCloud, cfg: &MembraneConfig) -> Result<Prepar
         spacing,
         scale,
         view,
+        free,
         index,
         attributes,
         outside,
@@ -311,17 +335,28 @@ fn complete_view(
     added
 }
 
+/// What the cameras saw of the space around the points.
+#[derive(Clone, Copy)]
+enum Seen<'a> {
+    /// Nothing known: points all around the object.
+    AllAround,
+    /// The cloud is one depth view.
+    View(&'a view::ViewBuffer),
+    /// A fused cloud, with the free space of the views it was made from.
+    Views(&'a dyn view::FreeSpace),
+}
+
 /// The occupancy grid of the inward force (`None` when it is off or the
 /// grid would be too large); with the local spacing `spacing`, each point
 /// counts for the area it samples, `(δ_i/δ)²`. The occluded back of a
 /// single view is unknown, not empty — except beyond the back of the
-/// completion.
+/// completion; so is every place no view of a fused cloud saw empty.
 fn outside_grid(
     cfg: &MembraneConfig,
     points: &[Vec3],
     spacing: Option<&[f64]>,
     delta: f64,
-    view: Option<&view::ViewBuffer>,
+    seen: Seen<'_>,
 ) -> Option<OutsideGrid> {
     let inward = cfg.step.inward.as_ref()?;
     let weights: Option<Vec<f64>> =
@@ -334,8 +369,10 @@ fn outside_grid(
         1 << 22,
     )
     .map(|mut g| {
-        if let Some(vb) = view {
-            g.restrict(|c| vb.is_seen_free(c) || vb.is_beyond_back(c));
+        match seen {
+            Seen::AllAround => {}
+            Seen::View(vb) => g.restrict(|c| vb.is_seen_free(c) || vb.is_beyond_back(c)),
+            Seen::Views(f) => g.restrict(|c| f.is_seen_free(c)),
         }
         g
     })

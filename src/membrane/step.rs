@@ -120,6 +120,9 @@ pub struct Stepper<'a> {
     pub outside: Option<&'a OutsideGrid>,
     /// The single view, if any: beyond the occupancy grid it decides what is outside.
     pub view: Option<&'a view::ViewBuffer>,
+    /// The free space of the views a fused cloud was made from, if given:
+    /// without a single view, it decides what is outside beyond the grid.
+    pub free: Option<&'a dyn view::FreeSpace>,
     /// Cross-section cap in input units.
     pub cross_max: f64,
     /// Centroid of the points: a normal facing away from it is the
@@ -264,7 +267,7 @@ impl Stepper<'_> {
     /// Whether the inward force may act at `p` ([`view::outside_at`]).
     fn is_outside(&self, p: &Vec3) -> bool {
         self.outside
-            .is_some_and(|grid| view::outside_at(grid, self.view, p))
+            .is_some_and(|grid| view::outside_at(grid, self.view, self.free, p))
     }
 
     /// Search every sample of `pass` (in parallel, coarse row chunks, one

@@ -48,6 +48,11 @@
 //!    1.67 → 1.45) but the last third's median F falls 0.266 → 0.242 and the
 //!    seen-side median 0.738 → 0.679 (the warm start then tracks worse), so
 //!    it stays off until tracking no longer drifts.
+//! 5. **Fused views** ([`FreeSpace`]). A cloud fused from many views (the
+//!    tracker's per-object model) is no single view, but the caller knows
+//!    where its views saw through; given that, the inward force acts only
+//!    there, as with one view (`Membrane::reconstruct_seen`; the
+//!    measurement is in [`crate::model`]).
 
 use super::occupancy::OutsideGrid;
 use crate::cloud::{Aabb, Vec3};
@@ -318,9 +323,33 @@ struct SeenExtent {
 /// surface and its poles lie beyond the grid; pulling the unseen back in
 /// there folded it into loops.) Without a view, everything beyond the grid
 /// is outside.
-pub fn outside_at(grid: &OutsideGrid, view: Option<&ViewBuffer>, p: &Vec3) -> bool {
-    grid.label(p)
-        .unwrap_or_else(|| view.is_none_or(|vb| vb.is_seen_free(p) || vb.is_beyond_back(p)))
+///
+/// A cloud that is no single view but comes with the free space of the
+/// views it was fused from ([`FreeSpace`]) is treated like a single view:
+/// beyond the grid only their seen-free space is outside.
+pub fn outside_at(
+    grid: &OutsideGrid,
+    view: Option<&ViewBuffer>,
+    free: Option<&dyn FreeSpace>,
+    p: &Vec3,
+) -> bool {
+    grid.label(p).unwrap_or_else(|| match (view, free) {
+        (Some(vb), _) => vb.is_seen_free(p) || vb.is_beyond_back(p),
+        (None, Some(f)) => f.is_seen_free(p),
+        (None, None) => true,
+    })
+}
+
+/// Free space seen by the views a fused cloud was made from (the tracker's
+/// per-object model, [`crate::model`]), in the cloud's frame. A fused cloud
+/// holds points from many sides and is no single view, so the membrane
+/// would otherwise take every place without points, the sides no view has
+/// seen yet included, for outside, and its inward force dented and
+/// crumpled the membrane there. With it, the inward force acts only where
+/// some view saw through (module docs of [`crate::model`] for the measurement).
+pub trait FreeSpace: Sync {
+    /// True when some view saw `p` empty.
+    fn is_seen_free(&self, p: &Vec3) -> bool;
 }
 
 /// The view of `points` for `viewpoint` (see the module docs): `None` for
@@ -407,14 +436,30 @@ mod tests {
         // so not outside with the view, outside without it.
         let back = Vec3::new(0.0, 0.0, 1.15);
         assert_eq!(grid.label(&back), None);
-        assert!(!outside_at(&grid, Some(&vb), &back));
-        assert!(outside_at(&grid, None, &back));
+        assert!(!outside_at(&grid, Some(&vb), None, &back));
+        assert!(outside_at(&grid, None, None, &back));
         // In front of the cap, beyond the grid: seen free, outside either way.
         let front = Vec3::new(0.0, 0.0, 0.7);
         assert_eq!(grid.label(&front), None);
-        assert!(outside_at(&grid, Some(&vb), &front));
+        assert!(outside_at(&grid, Some(&vb), None, &front));
         // On the grid the (restricted) label decides.
-        assert!(!outside_at(&grid, Some(&vb), &Vec3::new(0.0, 0.0, 0.95)));
+        assert!(!outside_at(
+            &grid,
+            Some(&vb),
+            None,
+            &Vec3::new(0.0, 0.0, 0.95)
+        ));
+        // A fused cloud's views (no single view): their free space decides,
+        // here the single view's own, behind which nothing was seen free.
+        struct Views<'a>(&'a ViewBuffer);
+        impl FreeSpace for Views<'_> {
+            fn is_seen_free(&self, p: &Vec3) -> bool {
+                self.0.is_seen_free(p)
+            }
+        }
+        let views = Views(&vb);
+        assert!(!outside_at(&grid, None, Some(&views), &back));
+        assert!(outside_at(&grid, None, Some(&views), &front));
     }
 
     #[test]

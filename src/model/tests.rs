@@ -129,6 +129,35 @@ fn free_space_of_all_views_carves_the_outside_but_not_the_solid() {
 }
 
 #[test]
+fn the_carving_is_the_views_free_space_seen_from_the_sensor() {
+    let h = Vec3::new(0.04, 0.03, 0.02);
+    let solid = cuboid(h, 900);
+    let mut model = ObjectModel::new(ModelConfig::default(), 0.08);
+    // Two views 5 degrees apart: the second is within view_angle_deg of the
+    // first, so the kept set holds only the first.
+    for a in [0.0, 5f64.to_radians()] {
+        model.integrate(&view(&solid, &pose(a)), &pose(a));
+    }
+    let now = pose(5f64.to_radians());
+    let carving = model.free_space(&now);
+    // Between the camera and the box (sensor frame: the box 1 m ahead).
+    let before = now
+        .transform_point(&Vec3::new(0.0, 0.0, -0.05).into())
+        .coords;
+    assert!(carving.is_seen_free(&before), "the space before the box");
+    // Inside the box: never free.
+    let centre = now.transform_point(&Vec3::zeros().into()).coords;
+    assert!(!carving.is_seen_free(&centre), "the box's centre");
+    // Beside the box, beyond the depth image: the camera saw past it.
+    let beside = now.transform_point(&Vec3::new(0.2, 0.0, 0.0).into()).coords;
+    assert!(carving.is_seen_free(&beside), "beside the box");
+    // The kept set alone agrees in the object frame; the latest view,
+    // held besides, stays within the cap.
+    assert!(model.is_free(&Vec3::new(0.2, 0.0, 0.0)));
+    assert!(model.bytes() <= model.config().max_bytes());
+}
+
+#[test]
 fn a_swapped_object_resets_the_model_within_two_frames() {
     let ball = sphere(0.05, 6_000);
     let brick = cuboid(Vec3::new(0.02, 0.06, 0.02), 1_500);

@@ -39,13 +39,14 @@ pub struct DepthView {
 /// What a view says of one place.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Evidence {
-    /// Outside the view's field, behind the camera, or hidden behind what it saw.
+    /// Behind the camera, or hidden behind what it saw.
     Unknown,
     /// On (within the margin of) the surface the view saw.
     Surface,
     /// The camera saw a surface behind this place: it is empty.
     SeenThrough,
-    /// Inside the field, but the object's silhouette does not cover it.
+    /// In front of the camera, but the object's silhouette does not cover
+    /// its direction (the camera saw past the object).
     OutsideSilhouette,
 }
 
@@ -132,11 +133,26 @@ impl DepthView {
         self.image.len() * std::mem::size_of::<f32>()
     }
 
+    /// True when this view saw `p` empty (through it, or beside the
+    /// object's silhouette).
+    pub fn is_free(&self, p: &Vec3) -> bool {
+        matches!(
+            self.evidence(p),
+            Evidence::SeenThrough | Evidence::OutsideSilhouette
+        )
+    }
+
     /// What this view says of `p`.
     pub fn evidence(&self, p: &Vec3) -> Evidence {
         let margin = self.margin;
         let Some(seen) = self.image.nearest_around(p).map(f64::from) else {
-            return Evidence::Unknown;
+            // Beyond the image, but in front of the camera: the camera saw
+            // past the segmented object there.
+            return if self.image.frame().depth(p) > 0.0 {
+                Evidence::OutsideSilhouette
+            } else {
+                Evidence::Unknown
+            };
         };
         let r = self.image.frame().range(p);
         if seen.is_infinite() {
@@ -196,12 +212,7 @@ impl ViewSet {
     /// True when some kept view saw `p` empty (through it, or beside the
     /// object's silhouette).
     pub fn is_free(&self, p: &Vec3) -> bool {
-        self.views.iter().any(|v| {
-            matches!(
-                v.evidence(p),
-                Evidence::SeenThrough | Evidence::OutsideSilhouette
-            )
-        })
+        self.views.iter().any(|v| v.is_free(p))
     }
 
     /// The kept views.

@@ -34,6 +34,7 @@ pub mod outputs;
 pub use crate::stream::StreamKey;
 
 use crate::cloud::{PointCloud, Vec3};
+use crate::membrane::view::FreeSpace;
 use crate::membrane::{
     self, Budget, ConfigError, Membrane, MembraneConfig, MembraneError, Reconstruction, Start,
     WarmStart,
@@ -538,8 +539,19 @@ impl Tracker {
             Some(w) => (&membranes.warm, Start::Warm(w)),
             None => (&membranes.cold, Start::Cold),
         };
+        // On the fused points, the inward force carves only the free space
+        // the model's views saw (model/mod.rs, membrane::view::FreeSpace).
+        let carving = fused
+            .as_ref()
+            .and(self.fused.as_ref())
+            .map(|f| f.model.free_space(&f.pose));
         let mut rec = engine
-            .reconstruct(input, &budget, &start_from)
+            .reconstruct_seen(
+                input,
+                &budget,
+                &start_from,
+                carving.as_ref().map(|c| c as &dyn FreeSpace),
+            )
             .map_err(membrane_err)?;
         let mut iterations = rec.report.iterations;
         let mut final_path = path;
