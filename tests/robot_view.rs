@@ -21,19 +21,7 @@
 
 mod common;
 
-use common::sepmem_stdout as sepmem;
-
-/// The number after `label` in `text`.
-fn figure(text: &str, label: &str) -> f64 {
-    let at = text
-        .find(label)
-        .unwrap_or_else(|| panic!("no `{label}` in {text}"));
-    text[at + label.len()..]
-        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
-        .next()
-        .and_then(|w| w.parse().ok())
-        .unwrap_or_else(|| panic!("no figure after `{label}` in {text}"))
-}
+use common::{figure, sepmem_stdout as sepmem};
 
 /// `sepmem replay -q` of the committed bag `name`, with the defaults.
 fn replay(name: &str) -> String {

@@ -120,7 +120,8 @@ pub struct ModelParams {
     pub max_views: usize,
     /// Largest side of a view's depth image, in bins.
     pub view_side: usize,
-    /// A view within this angle of a kept one replaces it, in degrees.
+    /// A view within this angle of a kept one is not kept (it is held only
+    /// as the latest view), in degrees.
     pub view_angle_deg: f64,
     /// Weight of the current frame's mean in a voxel it hits, in (0, 1].
     pub current_weight: f32,

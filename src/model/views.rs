@@ -12,7 +12,8 @@
 //! The images are stored as `f32` ranges with a fixed largest side, so each
 //! view costs at most `4·side²` bytes; the set keeps at most `max_views`
 //! views, preferring views from directions it does not yet hold (a view
-//! whose direction is within `min_angle` of a kept one replaces it). This is
+//! whose direction is within `min_angle` of a kept one is not kept; the
+//! model holds the latest view besides, [`super::ObjectModel::free_space`]). This is
 //! the bounded free-space memory of the fused model (issue "the robot's
 //! view": the unseen side is carved by the free space of all views).
 

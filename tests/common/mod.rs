@@ -86,6 +86,19 @@ pub fn external_bag_check(bag: &Path, args: &[String], test: &str) -> Option<Str
     ))
 }
 
+/// The number after `label` in `text` (a figure of `sepmem`'s printed
+/// summaries).
+pub fn figure(text: &str, label: &str) -> f64 {
+    let at = text
+        .find(label)
+        .unwrap_or_else(|| panic!("no `{label}` in {text}"));
+    text[at + label.len()..]
+        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .next()
+        .and_then(|w| w.parse().ok())
+        .unwrap_or_else(|| panic!("no figure after `{label}` in {text}"))
+}
+
 /// Run the built `sepmem` with `args`; its stdout, after asserting that it
 /// succeeded (the failure message holds both streams).
 pub fn sepmem_stdout<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> String {
