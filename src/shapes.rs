@@ -41,7 +41,7 @@ pub enum ShapeError {
         min: usize,
     },
     /// An unknown shape name was requested.
-    #[error("unknown procedural shape `{0}` (known: sphere, ellipsoid, rounded_box, bottle, bowl, torus, mug, capsule, bent_tube)")]
+    #[error("unknown procedural shape `{0}` (known: {known})", known = procedural_names().collect::<Vec<_>>().join(", "))]
     Unknown(String),
 }
 
@@ -76,6 +76,11 @@ pub const NAMES: [&str; 7] = [
 /// Further procedural shapes for the robot's-view sequences (`sepmem synth`;
 /// issue 20 names a capsule and a banana-like bent tube), not in Table 1.
 pub const SEQUENCE_NAMES: [&str; 2] = ["capsule", "bent_tube"];
+
+/// Every procedural shape [`by_name`] knows: Table 1's, then the sequences'.
+pub fn procedural_names() -> impl Iterator<Item = &'static str> {
+    NAMES.iter().chain(&SEQUENCE_NAMES).copied()
+}
 
 /// Build the shape called `name` at tessellation resolution `res` (roughly
 /// the number of segments around the shape; 96 gives ~50k triangles).
@@ -785,9 +790,7 @@ mod tests {
 
     /// Table 1's shapes and the sequences' own.
     fn every(res: usize) -> Vec<Shape> {
-        NAMES
-            .iter()
-            .chain(&SEQUENCE_NAMES)
+        procedural_names()
             .map(|n| by_name(n, res).unwrap())
             .collect()
     }

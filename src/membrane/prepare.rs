@@ -24,7 +24,8 @@
 
 use super::config::{Completion, MembraneConfig, PrepareConfig, SearchDelta};
 use super::occupancy::OutsideGrid;
-use super::{view, MembraneError};
+use super::view::{self, Seen};
+use super::MembraneError;
 use crate::cloud::{Aabb, CloudError, PointCloud, Vec3};
 use crate::density::{median_of, Density};
 use crate::separability::attribute::{AttributeSet, AttributeWeights, ChannelWeight};
@@ -86,6 +87,11 @@ pub(crate) struct PointCounts {
 }
 
 impl Prepared<'_> {
+    /// What the cameras saw around the used points.
+    pub(crate) fn seen(&self) -> Seen<'_> {
+        Seen::of(self.view.as_ref(), self.free)
+    }
+
     /// Whether the cloud was taken as a single depth view (a fused cloud
     /// with its views' free space, `free`, is not: it is seen from
     /// several sides, but like a single view it is partial, and the pole
@@ -270,11 +276,7 @@ pub(crate) fn prepare<'a>(
     let order_free =
         attributes.is_none() && spacing.is_none() && p.search_delta == SearchDelta::Global;
     let index = search_grid(&points, order_free, delta)?;
-    let seen = match (&view, free) {
-        (Some(vb), _) => Seen::View(vb),
-        (None, Some(f)) => Seen::Views(f),
-        (None, None) => Seen::AllAround,
-    };
+    let seen = Seen::of(view.as_ref(), free);
     let outside = outside_grid(cfg, &points, spacing.as_deref(), delta, seen);
     Ok(Prepared {
         counts: PointCounts {
@@ -335,17 +337,6 @@ fn complete_view(
     added
 }
 
-/// What the cameras saw of the space around the points.
-#[derive(Clone, Copy)]
-enum Seen<'a> {
-    /// Nothing known: points all around the object.
-    AllAround,
-    /// The cloud is one depth view.
-    View(&'a view::ViewBuffer),
-    /// A fused cloud, with the free space of the views it was made from.
-    Views(&'a dyn view::FreeSpace),
-}
-
 /// The occupancy grid of the inward force (`None` when it is off or the
 /// grid would be too large); with the local spacing `spacing`, each point
 /// counts for the area it samples, `(δ_i/δ)²`. The occluded back of a
@@ -369,10 +360,8 @@ fn outside_grid(
         1 << 22,
     )
     .map(|mut g| {
-        match seen {
-            Seen::AllAround => {}
-            Seen::View(vb) => g.restrict(|c| vb.is_seen_free(c) || vb.is_beyond_back(c)),
-            Seen::Views(f) => g.restrict(|c| f.is_seen_free(c)),
+        if !matches!(seen, Seen::AllAround) {
+            g.restrict(|c| seen.may_be_outside(c));
         }
         g
     })

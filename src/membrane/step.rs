@@ -118,11 +118,9 @@ pub struct Stepper<'a> {
     pub delta: f64,
     /// Occupancy grid of the inward force (`None` when it is off).
     pub outside: Option<&'a OutsideGrid>,
-    /// The single view, if any: beyond the occupancy grid it decides what is outside.
-    pub view: Option<&'a view::ViewBuffer>,
-    /// The free space of the views a fused cloud was made from, if given:
-    /// without a single view, it decides what is outside beyond the grid.
-    pub free: Option<&'a dyn view::FreeSpace>,
+    /// What the cameras saw: beyond the occupancy grid it decides what is
+    /// outside ([`view::outside_at`]).
+    pub seen: view::Seen<'a>,
     /// Cross-section cap in input units.
     pub cross_max: f64,
     /// Centroid of the points: a normal facing away from it is the
@@ -250,7 +248,7 @@ impl Stepper<'_> {
             return 1.0;
         }
         let grid = match self.outside {
-            Some(g) if self.view.is_none() => g,
+            Some(g) if !matches!(self.seen, view::Seen::View(_)) => g,
             _ => return 0.0,
         };
         // The back ray runs only as far as a front hit, or the full reach
@@ -267,7 +265,7 @@ impl Stepper<'_> {
     /// Whether the inward force may act at `p` ([`view::outside_at`]).
     fn is_outside(&self, p: &Vec3) -> bool {
         self.outside
-            .is_some_and(|grid| view::outside_at(grid, self.view, self.free, p))
+            .is_some_and(|grid| view::outside_at(grid, self.seen, p))
     }
 
     /// Search every sample of `pass` (in parallel, coarse row chunks, one

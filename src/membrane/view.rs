@@ -327,17 +327,42 @@ struct SeenExtent {
 /// A cloud that is no single view but comes with the free space of the
 /// views it was fused from ([`FreeSpace`]) is treated like a single view:
 /// beyond the grid only their seen-free space is outside.
-pub fn outside_at(
-    grid: &OutsideGrid,
-    view: Option<&ViewBuffer>,
-    free: Option<&dyn FreeSpace>,
-    p: &Vec3,
-) -> bool {
-    grid.label(p).unwrap_or_else(|| match (view, free) {
-        (Some(vb), _) => vb.is_seen_free(p) || vb.is_beyond_back(p),
-        (None, Some(f)) => f.is_seen_free(p),
-        (None, None) => true,
-    })
+pub fn outside_at(grid: &OutsideGrid, seen: Seen<'_>, p: &Vec3) -> bool {
+    grid.label(p).unwrap_or_else(|| seen.may_be_outside(p))
+}
+
+/// What the cameras saw of the space around a cloud's points.
+#[derive(Clone, Copy)]
+pub enum Seen<'a> {
+    /// Nothing: the points lie all around the object.
+    AllAround,
+    /// The cloud is one depth view.
+    View(&'a ViewBuffer),
+    /// A fused cloud, with the free space of the views it was made from.
+    Views(&'a dyn FreeSpace),
+}
+
+impl<'a> Seen<'a> {
+    /// A single view when there is one, else the fused views' free space
+    /// when given, else nothing.
+    pub fn of(view: Option<&'a ViewBuffer>, free: Option<&'a dyn FreeSpace>) -> Self {
+        match (view, free) {
+            (Some(vb), _) => Self::View(vb),
+            (None, Some(f)) => Self::Views(f),
+            (None, None) => Self::AllAround,
+        }
+    }
+
+    /// Whether the inward force may take `p` for outside: anywhere without
+    /// a view; with one, only where it was seen empty or lies beyond the
+    /// completion's back; with fused views, only where one saw it empty.
+    pub fn may_be_outside(&self, p: &Vec3) -> bool {
+        match self {
+            Self::AllAround => true,
+            Self::View(vb) => vb.is_seen_free(p) || vb.is_beyond_back(p),
+            Self::Views(f) => f.is_seen_free(p),
+        }
+    }
 }
 
 /// Free space seen by the views a fused cloud was made from (the tracker's
@@ -436,17 +461,16 @@ mod tests {
         // so not outside with the view, outside without it.
         let back = Vec3::new(0.0, 0.0, 1.15);
         assert_eq!(grid.label(&back), None);
-        assert!(!outside_at(&grid, Some(&vb), None, &back));
-        assert!(outside_at(&grid, None, None, &back));
+        assert!(!outside_at(&grid, Seen::View(&vb), &back));
+        assert!(outside_at(&grid, Seen::AllAround, &back));
         // In front of the cap, beyond the grid: seen free, outside either way.
         let front = Vec3::new(0.0, 0.0, 0.7);
         assert_eq!(grid.label(&front), None);
-        assert!(outside_at(&grid, Some(&vb), None, &front));
+        assert!(outside_at(&grid, Seen::View(&vb), &front));
         // On the grid the (restricted) label decides.
         assert!(!outside_at(
             &grid,
-            Some(&vb),
-            None,
+            Seen::View(&vb),
             &Vec3::new(0.0, 0.0, 0.95)
         ));
         // A fused cloud's views (no single view): their free space decides,
@@ -458,8 +482,8 @@ mod tests {
             }
         }
         let views = Views(&vb);
-        assert!(!outside_at(&grid, None, Some(&views), &back));
-        assert!(outside_at(&grid, None, Some(&views), &front));
+        assert!(!outside_at(&grid, Seen::Views(&views), &back));
+        assert!(outside_at(&grid, Seen::Views(&views), &front));
     }
 
     #[test]

@@ -307,7 +307,7 @@ impl ObjectModel {
             .insert(&local, self.frame, self.cfg.0.current_weight);
         if let Some(v) = &view {
             let angle = self.cfg.0.view_angle_deg.to_radians();
-            self.views.keep(v.clone(), angle, self.cfg.0.max_views);
+            self.views.keep(v, angle, self.cfg.0.max_views);
         }
         self.latest = view;
         Integration {

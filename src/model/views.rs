@@ -178,8 +178,9 @@ impl ViewSet {
     /// Keep `view` when its direction is more than `min_angle` (radians)
     /// from every kept view's (otherwise the kept one covers it); past
     /// `max_views` the view nearest in direction to another is dropped.
-    /// Returns whether the view was kept.
-    pub fn keep(&mut self, view: DepthView, min_angle: f64, max_views: usize) -> bool {
+    /// Returns whether the view was kept (a copy; most views are not, and
+    /// are not copied).
+    pub fn keep(&mut self, view: &DepthView, min_angle: f64, max_views: usize) -> bool {
         let cos_min = min_angle.cos();
         if self
             .views
@@ -188,7 +189,7 @@ impl ViewSet {
         {
             return false;
         }
-        self.views.push(view);
+        self.views.push(view.clone());
         while self.views.len() > max_views.max(1) {
             let i = self.most_redundant();
             self.views.remove(i);
@@ -269,14 +270,14 @@ mod tests {
         let back = Vec3::new(0.0, 0.0, -5.0);
         let mut set = ViewSet::default();
         set.keep(
-            DepthView::new(&visible_cap(front, 8_000), front, 2.0, 128).unwrap(),
+            &DepthView::new(&visible_cap(front, 8_000), front, 2.0, 128).unwrap(),
             0.3,
             4,
         );
         let behind_front_surface = Vec3::new(0.0, 0.0, -1.3);
         assert!(!set.is_free(&behind_front_surface));
         set.keep(
-            DepthView::new(&visible_cap(back, 8_000), back, 2.0, 128).unwrap(),
+            &DepthView::new(&visible_cap(back, 8_000), back, 2.0, 128).unwrap(),
             0.3,
             4,
         );
@@ -292,7 +293,7 @@ mod tests {
             let a = k as f64 * 0.2;
             let eye = Vec3::new(5.0 * a.cos(), 5.0 * a.sin(), 0.0);
             set.keep(
-                DepthView::new(&visible_cap(eye, 2_000), eye, 2.0, 64).unwrap(),
+                &DepthView::new(&visible_cap(eye, 2_000), eye, 2.0, 64).unwrap(),
                 0.35,
                 6,
             );

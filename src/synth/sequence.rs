@@ -158,7 +158,7 @@ impl SceneMotion {
 /// Everything that defines a synthetic sequence.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SequenceSpec {
-    /// Procedural shape names ([`crate::shapes::NAMES`]) or mesh file paths.
+    /// Procedural shape names ([`crate::shapes::procedural_names`]) or mesh file paths.
     pub shapes: Vec<String>,
     /// Number of frames.
     pub frames: usize,
@@ -292,16 +292,17 @@ fn shape_mesh(shape: &str, res: usize) -> Result<TriMesh, SequenceError> {
         name: shape.to_string(),
         reason,
     };
-    if crate::shapes::NAMES.contains(&shape) || crate::shapes::SEQUENCE_NAMES.contains(&shape) {
+    if crate::shapes::procedural_names().any(|n| n == shape) {
         return crate::shapes::by_name(shape, res)
             .map(|s| s.mesh)
             .map_err(|e| bad(e.to_string()));
     }
     if !Path::new(shape).is_file() {
         return Err(bad(format!(
-            "neither a procedural shape ({}, {}) nor a mesh file",
-            crate::shapes::NAMES.join(", "),
-            crate::shapes::SEQUENCE_NAMES.join(", ")
+            "neither a procedural shape ({}) nor a mesh file",
+            crate::shapes::procedural_names()
+                .collect::<Vec<_>>()
+                .join(", ")
         )));
     }
     let loaded = crate::io::load_mesh(shape).map_err(|e| bad(e.to_string()))?;
