@@ -559,7 +559,7 @@ fn view_score(
             posed_truth,
             mesh: &r.reconstruction.mesh,
             points,
-            warm_motion: r.motion.filter(|_| r.path == StartPath::Warm),
+            warm_motion: r.motion,
             tau_fraction,
         })
         .with_context(|| format!("view scores of {id} frame {}", r.frame))?;

@@ -166,6 +166,30 @@ pub fn align_from(
     Some(best)
 }
 
+/// The share of `data` (at most `max_points`, evenly strided) that lies
+/// within `trim` of a point of `index` once brought back by `motion`'s
+/// inverse: how much of a frame a model explains under that motion.
+pub fn inlier_share(
+    index: &KnnIndex,
+    data: &[Vec3],
+    motion: &Rigid,
+    trim: f64,
+    max_points: usize,
+) -> f64 {
+    if index.is_empty() || data.is_empty() {
+        return 0.0;
+    }
+    let stride = (data.len() / max_points.max(1)).max(1);
+    let inv = motion.inverse();
+    let (mut sampled, mut within) = (0usize, 0usize);
+    for q in data.iter().step_by(stride) {
+        sampled += 1;
+        let ql = inv.transform_point(&(*q).into()).coords;
+        within += usize::from(index.nearest_one(&ql).0 <= trim * trim);
+    }
+    within as f64 / sampled as f64
+}
+
 /// A new point matched to its nearest model vertex.
 #[derive(Debug, Clone, Copy)]
 struct Match {
@@ -396,5 +420,28 @@ mod tests {
         );
         assert_eq!(a.motion, init);
         assert_eq!(a.steps, 0);
+    }
+
+    #[test]
+    fn the_inlier_share_counts_the_points_the_moved_model_explains() {
+        let model: Vec<Vec3> = (0..100)
+            .map(|i| Vec3::new(i as f64 * 0.01, 0.0, 0.0))
+            .collect();
+        let index = KnnIndex::new(model.clone());
+        let motion = Rigid::translation(0.0, 1.0, 0.0);
+        // Half the points on the moved model, half 0.5 off it.
+        let mut data: Vec<Vec3> = model.iter().map(|p| p + Vec3::new(0.0, 1.0, 0.0)).collect();
+        data.truncate(50);
+        data.extend((0..50).map(|i| Vec3::new(i as f64 * 0.01, 1.5, 0.0)));
+        assert_eq!(inlier_share(&index, &data, &motion, 0.02, 1000), 0.5);
+        // Unmoved, none of them lies within the trim.
+        assert_eq!(
+            inlier_share(&index, &data, &Rigid::identity(), 0.02, 1000),
+            0.0
+        );
+        assert_eq!(
+            inlier_share(&KnnIndex::new(Vec::new()), &data, &motion, 0.02, 10),
+            0.0
+        );
     }
 }

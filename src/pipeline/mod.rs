@@ -12,8 +12,11 @@
 //!    ICP steps of the previous surface onto the new points from the
 //!    centroid shift, and from the last motion and from rest when those fit
 //!    clearly better ([`align`]); when the aligned surface still explains
-//!    fewer than `icp_min_inliers` of the points, the track is lost and the
-//!    frame starts cold;
+//!    fewer than `icp_min_inliers` of the points, the frame starts cold: on
+//!    the fused model, which it keeps, when the model explains that share
+//!    under the same motion (a **refit**: the surface was lost, not the
+//!    track; once per surface), else from this frame alone (the track is
+//!    lost, and the model restarts);
 //! 4. evolves the membrane (paper §III-D/E steps 2–5) under the frame's
 //!    budget: an iteration cap (small for warm frames) and a wall-clock
 //!    deadline shared by all attempts of the frame;
@@ -97,6 +100,10 @@ pub struct PipelineConfig {
     /// track is lost and the frame starts cold ([`PathReason::LostTrack`]).
     /// `None`: never.
     pub icp_min_inliers: Option<Share>,
+    /// With `model`: a frame below `icp_min_inliers` that the fused model
+    /// explains starts cold on the model and keeps it ([`PathReason::Refit`]);
+    /// `None` (null, the default): it loses the track.
+    pub refit: Option<RefitConfig>,
     /// `membrane.prepare.density_sample` of warm-started frames (0: the membrane's own).
     pub warm_density_sample: usize,
     /// Marker namespace.
@@ -136,6 +143,7 @@ impl Default for PipelineConfig {
             icp_trim: 0.03,
             icp_max_points: 300,
             icp_min_inliers: Some(Share(0.75)),
+            refit: None,
             warm_density_sample: 256,
             marker_namespace: "sepmem".into(),
             score_samples: 10_000,
@@ -144,6 +152,19 @@ impl Default for PipelineConfig {
             model: Some(crate::model::ModelConfig::default()),
         }
     }
+}
+
+/// `pipeline.refit`: when the surface, not the track, was lost. A frame the
+/// aligned previous surface explains too poorly (`icp_min_inliers`) but
+/// whose points lie within `icp_trim` of the fused model's under the same
+/// motion, as a share of at least `min_model_inliers`, starts cold on the
+/// fused model, which keeps its views and pose; a refit surface that fails
+/// the next frame too loses the track.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RefitConfig {
+    /// Least share of the frame's sampled points the model must explain.
+    pub min_model_inliers: Share,
 }
 
 /// A share in (0, 1], checked when the configuration is parsed.
@@ -252,6 +273,17 @@ pub enum PathReason {
         /// The share of the sampled points matched within the trim.
         inliers: f64,
     },
+    /// Aligned, the previous surface held fewer than `icp_min_inliers` of
+    /// the frame's sampled points, but the fused model (`pipeline.model`)
+    /// held at least that share under the same motion: the surface, not
+    /// the track, was lost. The membrane starts cold on the fused model,
+    /// which keeps its views and its pose (no restart).
+    Refit {
+        /// The share the previous surface matched.
+        surface: f64,
+        /// The share the fused model matched.
+        model: f64,
+    },
     /// A warm result failed one of the checks above, and its cold redo
     /// failed that check too: the frame itself separates worse (a thinner
     /// or edge-on view), and the warm result, which keeps what earlier
@@ -275,6 +307,7 @@ impl fmt::Display for PathReason {
             Self::WarmFailed { eta, previous } => write!(f, "warm_failed({eta:.3}<{previous:.3})"),
             Self::Drifted { eta, reference } => write!(f, "drifted({eta:.3}<{reference:.3})"),
             Self::LostTrack { inliers } => write!(f, "lost_track({inliers:.2})"),
+            Self::Refit { surface, model } => write!(f, "refit({surface:.2},model={model:.2})"),
             Self::WarmKept { eta, cold } => write!(f, "warm_kept({eta:.3},cold={cold:.3})"),
         }
     }
@@ -295,7 +328,9 @@ pub struct FrameResult {
     pub iterations: usize,
     /// The reconstruction (mesh, surface, membrane report).
     pub reconstruction: Reconstruction,
-    /// Rigid motion applied to the previous surface (warm frames).
+    /// Rigid motion of the object since the previous frame: the one applied
+    /// to the previous surface (warm frames) or to the fused model (a
+    /// refit); `None` when the frame restarted the stream.
     pub motion: Option<align::Rigid>,
     /// Wall-clock time of the frame in ms.
     pub latency_ms: f64,
@@ -335,8 +370,12 @@ struct Previous {
     eta: f64,
     /// η_g of the stream's last cold frame (the drift reference).
     eta_ref: f64,
-    /// The rigid motion of the last frame (identity after a cold one).
+    /// The rigid motion of the last frame (identity after a restart).
     motion: align::Rigid,
+    /// This surface came from a refit ([`PathReason::Refit`]): when it does
+    /// not explain the next frame either, the model is what is wrong, and
+    /// the track is lost.
+    refitted: bool,
 }
 
 impl Previous {
@@ -619,6 +658,11 @@ impl Tracker {
             (StartPath::Warm, Some(prev)) => prev.eta_ref,
             _ => rec.report.eta_final,
         };
+        // The motion that moved the model on (none after a restart).
+        let motion = match (final_path, reason) {
+            (StartPath::Warm, _) | (StartPath::Cold, PathReason::Refit { .. }) => motion,
+            (StartPath::Cold, _) => None,
+        };
         let (vertices, normals) = alignment_model(&rec.mesh);
         self.previous = Some(Previous {
             surface: rec.surface.clone(),
@@ -628,10 +672,8 @@ impl Tracker {
             size,
             eta: rec.report.eta_final,
             eta_ref,
-            motion: match final_path {
-                StartPath::Warm => motion.unwrap_or_else(align::Rigid::identity),
-                StartPath::Cold => align::Rigid::identity(),
-            },
+            motion: motion.unwrap_or_else(align::Rigid::identity),
+            refitted: matches!(reason, PathReason::Refit { .. }),
         });
         Ok(FrameResult {
             stream: self.key.clone(),
@@ -659,8 +701,9 @@ impl Tracker {
         cfg: &PipelineConfig,
     ) -> Option<PointCloud> {
         cfg.model.as_ref()?;
+        // A warm frame, or a refit (cold, with a motion), moves the model on.
         match (path, motion) {
-            (StartPath::Warm, Some(m)) if self.fused.is_some() => {
+            (_, Some(m)) if self.fused.is_some() => {
                 if let Some(f) = self.fused.as_mut() {
                     f.pose = m * f.pose;
                     f.model.integrate(&raw.points, &f.pose);
@@ -681,6 +724,29 @@ impl Tracker {
         let mut model = crate::model::ObjectModel::new(mc.clone(), size);
         model.integrate(&raw.points, &pose);
         self.fused = Some(Fused { model, pose });
+    }
+
+    /// The share of the frame's points the fused model explains under
+    /// `motion` (its points in the previous frame's cloud frame, within
+    /// `trim`); `None` without a model, or when the previous surface was a
+    /// refit already.
+    fn model_inliers(
+        &self,
+        prev: &Previous,
+        cloud: &PointCloud,
+        motion: &align::Rigid,
+        trim: f64,
+        max_points: usize,
+    ) -> Option<f64> {
+        let f = self.fused.as_ref().filter(|_| !prev.refitted)?;
+        let index = KnnIndex::new(f.model.points_in(&f.pose));
+        Some(align::inlier_share(
+            &index,
+            &cloud.points,
+            motion,
+            trim,
+            max_points,
+        ))
     }
 
     fn choose_path(
@@ -733,7 +799,23 @@ impl Tracker {
         );
         let inliers = alignment.map_or(1.0, |a| a.inlier_fraction);
         if cfg.icp_min_inliers.is_some_and(|m| inliers < m.get()) {
-            return cold(PathReason::LostTrack { inliers });
+            let refit = alignment.zip(cfg.refit.as_ref()).and_then(|(a, r)| {
+                let trim = cfg.icp_trim * scale;
+                let model = self.model_inliers(prev, cloud, &a.motion, trim, cfg.icp_max_points)?;
+                (model >= r.min_model_inliers.get()).then_some((model, a.motion))
+            });
+            return match refit {
+                Some((model, motion)) => (
+                    StartPath::Cold,
+                    PathReason::Refit {
+                        surface: inliers,
+                        model,
+                    },
+                    None,
+                    Some(motion),
+                ),
+                None => cold(PathReason::LostTrack { inliers }),
+            };
         }
         let motion = alignment.map_or(shift, |a| a.motion);
         match prev.surface.rigidly_moved(&motion) {
