@@ -172,6 +172,29 @@ pub struct InitConfig {
     pub margin: f64,
     /// Initial control grid `[M, L]` (columns around, rows pole to pole).
     pub grid: [usize; 2],
+    /// A warm start on fused views first encloses the points outside it
+    /// ([`super::enclose`]); `None` turns it off.
+    pub warm_enclose: Option<EncloseConfig>,
+}
+
+/// `membrane.init.warm_enclose`: how far outside a warm surface a point
+/// must lie to push it out, and how far beyond the point it is pushed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EncloseConfig {
+    /// A point more than this many δ outside the surface pushes it out.
+    pub margin_delta: f64,
+    /// ... to this many δ beyond the point.
+    pub pad_delta: f64,
+}
+
+impl Default for EncloseConfig {
+    fn default() -> Self {
+        Self {
+            margin_delta: 2.0,
+            pad_delta: 1.0,
+        }
+    }
 }
 
 impl Default for InitConfig {
@@ -183,6 +206,7 @@ impl Default for InitConfig {
             quantile: 0.002,
             margin: 1.05,
             grid: [8, 5],
+            warm_enclose: Some(EncloseConfig::default()),
         }
     }
 }
@@ -617,7 +641,19 @@ fn validate_init(i: &InitConfig) -> Result<(), ConfigError> {
         i.margin >= 1.0 && i.margin.is_finite(),
         "init.margin",
         "must be >= 1",
-    )
+    )?;
+    let enclose = i.warm_enclose.as_ref();
+    let distances = [
+        (
+            "init.warm_enclose.margin_delta",
+            enclose.map_or(0.0, |e| e.margin_delta),
+        ),
+        (
+            "init.warm_enclose.pad_delta",
+            enclose.map_or(0.0, |e| e.pad_delta),
+        ),
+    ];
+    check_each(&distances, non_negative, "must be a finite value >= 0")
 }
 
 fn validate_step(s: &StepConfig) -> Result<(), ConfigError> {

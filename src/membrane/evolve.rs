@@ -18,12 +18,14 @@
 //! refitted once more to itself at the arc-length parameters.
 
 use super::config::{MembraneConfig, SearchDelta};
+use super::enclose;
 use super::extract::extract_mesh;
 use super::fit::Fits;
 use super::prepare::Prepared;
 use super::regularize::{self, Samples};
 use super::schedule::{Next, Schedule};
 use super::step::{Pass, SampleOut, Stepper, ThreadScratch};
+use super::view::Seen;
 use super::{
     init, Budget, MembraneError, PhaseTimes, Reconstruction, Report, StopReason, WarmStart,
 };
@@ -94,6 +96,11 @@ pub(crate) fn evolve(
     let t_start = Instant::now();
     let t_init = Instant::now();
     let (mut surface, pole_axis) = init::initial(&prep.points, &cfg.init, warm, pole, fits)?;
+    if let (Some(_), Some(e), Seen::Views(_)) = (warm, &cfg.init.warm_enclose, prep.seen()) {
+        let fit = fits.get(surface.m(), surface.l())?;
+        let (margin, pad) = (e.margin_delta * prep.delta, e.pad_delta * prep.delta);
+        enclose::enclose(&mut surface, fit, &prep.points, margin, pad)?;
+    }
     let mut times = PhaseTimes {
         prepare_ms: prep.prepare_ms,
         init_ms: ms(t_init),

@@ -31,6 +31,7 @@
 //! owns the fit cache and is shared by every reconstruction.
 
 pub mod config;
+pub mod enclose;
 pub mod evolve;
 pub mod extract;
 pub mod fit;
@@ -45,7 +46,7 @@ pub mod step;
 pub mod view;
 
 pub use config::{
-    AttributeWeight, Completion, ConfigError, FitConfig, GrowthConfig, InitConfig,
+    AttributeWeight, Completion, ConfigError, EncloseConfig, FitConfig, GrowthConfig, InitConfig,
     InsideDenserConfig, InwardConfig, LocalSpacingConfig, MembraneConfig, PoleAxis,
     PoleTensionConfig, PrepareConfig, RegularizeConfig, ScheduleConfig, SearchDelta, StepConfig,
     ViewConfig,

@@ -102,7 +102,7 @@ pub struct PipelineConfig {
     pub icp_min_inliers: Option<Share>,
     /// With `model`: a frame below `icp_min_inliers` that the fused model
     /// explains starts cold on the model and keeps it ([`PathReason::Refit`]);
-    /// `None` (null, the default): it loses the track.
+    /// `None` (null): it loses the track.
     pub refit: Option<RefitConfig>,
     /// `membrane.prepare.density_sample` of warm-started frames (0: the membrane's own).
     pub warm_density_sample: usize,
@@ -143,7 +143,9 @@ impl Default for PipelineConfig {
             icp_trim: 0.03,
             icp_max_points: 300,
             icp_min_inliers: Some(Share(0.75)),
-            refit: None,
+            refit: Some(RefitConfig {
+                min_model_inliers: Share(0.75),
+            }),
             warm_density_sample: 256,
             marker_namespace: "sepmem".into(),
             score_samples: 10_000,
