@@ -478,6 +478,29 @@ pub struct ViewConfig {
     /// ([`super::view`], 4.); `None` (the default): unbounded (only the
     /// completion's back, with `completion = "mirror"`).
     pub back: Option<BackConfig>,
+    /// The mirrored completion of a fused cloud's latest view while its
+    /// model holds few views ([`super::view`], 6.); `None` turns it off.
+    pub fused_completion: Option<FusedCompletionConfig>,
+}
+
+/// `membrane.view.fused_completion`: when a fused cloud is completed, and
+/// which mirror points it keeps.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FusedCompletionConfig {
+    /// Completed only while the model keeps at most this many views.
+    pub max_views: usize,
+    /// Mirror points within this many δ of a fused point are dropped.
+    pub gap_delta: f64,
+}
+
+impl Default for FusedCompletionConfig {
+    fn default() -> Self {
+        Self {
+            max_views: 1,
+            gap_delta: 6.0,
+        }
+    }
 }
 
 /// `membrane.view.back`: nothing of a single view's object lies deeper than
@@ -502,6 +525,7 @@ impl Default for ViewConfig {
             viewpoint: super::view::Viewpoint::Mode(super::view::ViewMode::Auto),
             completion: Completion::None,
             back: None,
+            fused_completion: None,
         }
     }
 }
@@ -572,6 +596,14 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), ConfigError> {
         cfg.view.back.as_ref().is_none_or(|b| pos(b.extent)),
         "view.back.extent",
         "must be positive (null leaves the back unbounded)",
+    )?;
+    check(
+        cfg.view
+            .fused_completion
+            .as_ref()
+            .is_none_or(|f| non_negative(f.gap_delta)),
+        "view.fused_completion.gap_delta",
+        "must be a finite value >= 0",
     )
 }
 

@@ -46,10 +46,10 @@ pub mod step;
 pub mod view;
 
 pub use config::{
-    AttributeWeight, Completion, ConfigError, EncloseConfig, FitConfig, GrowthConfig, InitConfig,
-    InsideDenserConfig, InwardConfig, LocalSpacingConfig, MembraneConfig, PoleAxis,
-    PoleTensionConfig, PrepareConfig, RegularizeConfig, ScheduleConfig, SearchDelta, StepConfig,
-    ViewConfig,
+    AttributeWeight, Completion, ConfigError, EncloseConfig, FitConfig, FusedCompletionConfig,
+    GrowthConfig, InitConfig, InsideDenserConfig, InwardConfig, LocalSpacingConfig, MembraneConfig,
+    PoleAxis, PoleTensionConfig, PrepareConfig, RegularizeConfig, ScheduleConfig, SearchDelta,
+    StepConfig, ViewConfig,
 };
 pub use extract::{extract_mesh, SEPARABILITY_CHANNEL};
 

@@ -260,7 +260,10 @@ pub(crate) fn prepare<'a>(
         vec![delta; points.len()]
     };
     let mut points = points;
-    let completed = complete_view(cfg, view.as_mut(), &mut points, &mut d_used);
+    let completed = match (view.as_mut(), free, &cfg.view.fused_completion) {
+        (None, Some(f), Some(fc)) => complete_fused(f, fc, delta, &mut points, &mut d_used),
+        (view, ..) => complete_view(cfg, view, &mut points, &mut d_used),
+    };
     let spacing = p
         .local_spacing
         .as_ref()
@@ -335,6 +338,47 @@ fn complete_view(
         d_used.push(d_used[i]);
     }
     added
+}
+
+/// The mirrored completion of a fused cloud (`view.fused_completion`,
+/// [`view`] 6.): while the model keeps at most `max_views` views, the fused
+/// points on its latest view's surface are completed as one view
+/// ([`view::ViewBuffer::complete`]), keeping the mirror points that no
+/// view saw empty and that lie more than `gap_delta`·δ from every fused
+/// point; appended to `points` and `d_used` (each takes its source's
+/// d_i). Returns how many were added.
+fn complete_fused(
+    free: &dyn view::FreeSpace,
+    cfg: &super::config::FusedCompletionConfig,
+    delta: f64,
+    points: &mut Vec<Vec3>,
+    d_used: &mut Vec<f64>,
+) -> usize {
+    let Some(eye) = free
+        .latest_eye()
+        .filter(|_| free.views_kept() <= cfg.max_views)
+    else {
+        return 0;
+    };
+    let seen: Vec<usize> = (0..points.len())
+        .filter(|&i| free.on_latest_surface(&points[i]))
+        .collect();
+    let front: Vec<Vec3> = seen.iter().map(|&i| points[i]).collect();
+    let Some(vb) = view::ViewBuffer::new(&front, eye, delta) else {
+        return 0;
+    };
+    let fused = KnnIndex::new(points.clone());
+    let gap2 = (cfg.gap_delta * delta).powi(2);
+    let extra: Vec<(Vec3, usize)> = vb
+        .complete(&front)
+        .into_iter()
+        .filter(|(q, _)| !free.is_seen_free(q) && fused.nearest_one(q).0 > gap2)
+        .collect();
+    for &(q, k) in &extra {
+        points.push(q);
+        d_used.push(d_used[seen[k]]);
+    }
+    extra.len()
 }
 
 /// The occupancy grid of the inward force (`None` when it is off or the

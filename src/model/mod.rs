@@ -417,6 +417,21 @@ impl FreeSpace for Carving<'_> {
         let q = self.to_object.transform_point(&(*p).into()).coords;
         self.model.latest.as_ref().is_some_and(|v| v.is_free(&q)) || self.model.views.is_free(&q)
     }
+
+    fn latest_eye(&self) -> Option<Vec3> {
+        let eye = self.model.latest.as_ref()?.eye();
+        Some(self.to_object.inverse_transform_point(&eye.into()).coords)
+    }
+
+    fn on_latest_surface(&self, p: &Vec3) -> bool {
+        let q = self.to_object.transform_point(&(*p).into()).coords;
+        let latest = self.model.latest.as_ref();
+        latest.is_some_and(|v| v.evidence(&q) == Evidence::Surface)
+    }
+
+    fn views_kept(&self) -> usize {
+        self.model.views.views().len()
+    }
 }
 
 #[cfg(test)]
