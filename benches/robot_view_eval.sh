@@ -1,0 +1,70 @@
+#!/usr/bin/env bash
+# The robot's-view evaluation of issue 20 used to choose the warm enclosure,
+# the refit and the fused completion: 8 sequences beside the 7 committed
+# robot_view bags (the "15"), and 8 held out, replayed with `sepmem replay -q`
+# and summarised (median last-third F, volume IoU, largest volume ratio, cold
+# frames after the first, share of visible points > 3 sigma outside).
+#
+#   benches/robot_view_eval.sh [OUT_DIR] [-- replay args, e.g. --set key=value]
+#
+# Needs a release build (cargo build --release) and, for the YCB banana, the
+# shared datasets (../shared/datasets).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+OUT=${1:-/tmp/sepmem-robot-view}; shift || true
+[ "${1:-}" = "--" ] && shift
+S=target/release/sepmem
+YCB=${YCB:-../shared/datasets/meshes_ground_truth/ycb_video_simplified/YcbBanana.obj}
+mkdir -p "$OUT/bags" "$OUT/runs"
+CAM="--width 480 --height 360 --focal 393.75 --distance 1.0 --noise kinect --outliers 0 --frames 30 --degrees 180 --quiet"
+KIN="--noise kinect --outliers 0 --frames 30 --quiet"
+b="$OUT/bags"
+# The 8 beside the committed bags (tuned on).
+$S synth -o "$b/t_turn_mug.mcap" --shapes mug --motion turn $CAM --mesh-res 48 --seed 5
+for shape in bottle ellipsoid torus; do
+    $S synth -o "$b/t_turn_$shape.mcap" --shapes $shape --motion turn $CAM --mesh-res 32 --seed 5
+done
+$S synth -o "$b/t_orbit_rounded_box.mcap" --shapes rounded_box --motion orbit $CAM --mesh-res 32 --seed 8
+$S synth -o "$b/t_orbit_capsule.mcap" --shapes capsule --motion orbit $CAM --mesh-res 32 --seed 8
+$S synth -o "$b/t_turn_rounded_box.mcap" --shapes rounded_box --motion turn $CAM --mesh-res 32 --seed 9
+$S synth -o "$b/t_turn_bent_tube.mcap" --shapes bent_tube --motion turn $CAM --mesh-res 32 --seed 9
+if [ -f "$YCB" ]; then
+    $S synth -o "$b/t_orbit_banana.mcap" --shapes "$YCB" --motion orbit $CAM --seed 8
+else
+    echo "SKIPPED the orbited YCB banana: $YCB not found" >&2
+fi
+cp tests/data/bags/robot_view/*.mcap "$b/"
+# The 8 held out (default camera, 640x480, f 525).
+$S synth -o "$b/h_sphere_turn.mcap" --shapes sphere --motion turn --distance 0.8 --seed 11 $KIN
+$S synth -o "$b/h_bowl_turn.mcap" --shapes bowl --motion turn --seed 12 $KIN
+$S synth -o "$b/h_capsule_far.mcap" --shapes capsule --motion turn --distance 1.3 --seed 13 --mesh-res 32 $KIN
+$S synth -o "$b/h_box_orbit_near.mcap" --shapes rounded_box --motion orbit --distance 0.8 --seed 14 $KIN
+$S synth -o "$b/h_bottle_orbit.mcap" --shapes bottle --motion orbit --seed 15 $KIN
+$S synth -o "$b/h_mug_orbit.mcap" --shapes mug --motion orbit --seed 16 $KIN
+$S synth -o "$b/h_tube_pick.mcap" --shapes bent_tube --motion pick --seed 18 --mesh-res 32 $KIN
+$S synth -o "$b/h_ell_360.mcap" --shapes ellipsoid --motion turn --degrees 360 --seed 17 $KIN
+export S OUT
+ls "$b"/*.mcap | xargs -P "$(nproc)" -I@@ sh -c '"$S" replay "@@" -q '"$*"' > "$OUT/runs/$(basename "@@" .mcap).txt" 2>&1'
+python3 - "$OUT/runs" <<'PY'
+import glob, os, re, statistics as st, sys
+rows = {}
+for f in sorted(glob.glob(sys.argv[1] + "/*.txt")):
+    t = open(f).read()
+    m = re.search(r"last third \(\d+\): F ([\d.]+) seen side [\d.]+ IoU ([\d.]+)", t)
+    v = re.search(r"volume ratio min [\d.]+ max ([\d.]+)", t)
+    c = re.search(r"\((\d+) warm, (\d+) cold\)", t)
+    o = re.search(r"outside by > 3 sigma (\d+) of (\d+)", t)
+    s = re.search(r"seen side median ([\d.]+)", t)
+    if not (m and v and c and o and s):
+        print(os.path.basename(f), "no summary"); continue
+    name = os.path.basename(f)[:-4]
+    r = (float(m[1]), float(m[2]), float(v[1]), int(c[2]) - 1, int(o[1]) / int(o[2]), float(s[1]))
+    rows[name] = r
+    print(f"{name:24} F {r[0]:.3f} IoU {r[1]:.3f} vmax {r[2]:.2f} cold {r[3]} out3 {r[4]:.3f} seen {r[5]:.3f}")
+for label, keep in (("tuned (15)", lambda n: not n.startswith("h_")), ("held out (8)", lambda n: n.startswith("h_"))):
+    sel = [r for n, r in rows.items() if keep(n)]
+    if sel:
+        med = lambda k: st.median(x[k] for x in sel)
+        print(f"{label}: median F {med(0):.3f} (mean {st.mean(x[0] for x in sel):.3f}) IoU {med(1):.3f} "
+              f"vmax {med(2):.2f} cold {sum(x[3] for x in sel)} out3 {med(4):.3f} seen {med(5):.3f}")
+PY
