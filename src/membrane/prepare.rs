@@ -346,7 +346,10 @@ fn complete_view(
 /// ([`view::ViewBuffer::complete`]), keeping the mirror points that no
 /// view saw empty and that lie more than `gap_delta`·δ from every fused
 /// point; appended to `points` and `d_used` (each takes its source's
-/// d_i). Returns how many were added.
+/// d_i). Returns how many were added. The gap is measured to the used
+/// points, not through the frame's k-NN index, which holds the points
+/// before the outlier filter (with it, the 15 sequences of the measurement
+/// gave last-third IoU 0.768 instead of 0.834).
 fn complete_fused(
     free: &dyn view::FreeSpace,
     cfg: &super::config::FusedCompletionConfig,

@@ -168,7 +168,8 @@ pub fn align_from(
 
 /// The share of `data` (at most `max_points`, evenly strided) that lies
 /// within `trim` of a point of `index` once brought back by `motion`'s
-/// inverse: how much of a frame a model explains under that motion.
+/// inverse: how much of a frame a model explains under that motion (an
+/// [`align`] of no steps).
 pub fn inlier_share(
     index: &KnnIndex,
     data: &[Vec3],
@@ -176,18 +177,7 @@ pub fn inlier_share(
     trim: f64,
     max_points: usize,
 ) -> f64 {
-    if index.is_empty() || data.is_empty() {
-        return 0.0;
-    }
-    let stride = (data.len() / max_points.max(1)).max(1);
-    let inv = motion.inverse();
-    let (mut sampled, mut within) = (0usize, 0usize);
-    for q in data.iter().step_by(stride) {
-        sampled += 1;
-        let ql = inv.transform_point(&(*q).into()).coords;
-        within += usize::from(index.nearest_one(&ql).0 <= trim * trim);
-    }
-    within as f64 / sampled as f64
+    align(index, None, data, *motion, 0, trim, max_points).inlier_fraction
 }
 
 /// A new point matched to its nearest model vertex.
