@@ -223,7 +223,9 @@ fn with_overrides(mut merged: Value, sets: &[String]) -> Result<Config, ConfigEr
     for set in sets {
         apply_override(&mut merged, set)?;
     }
-    serde_json::from_value(merged).map_err(|e| ConfigError::Invalid(e.to_string()))
+    // The path names the key whose value a type refused (a share, a count).
+    serde_path_to_error::deserialize(merged)
+        .map_err(|e| ConfigError::Invalid(format!("{}: {}", e.path(), e.inner())))
 }
 
 fn parse_text(text: &str, ext: &str, origin: &str) -> Result<Value, ConfigError> {
@@ -320,6 +322,25 @@ mod tests {
         assert!(err.to_string().contains("`no_such`"), "{err}");
         let err = Config::load(None, &["missing_equals".into()]).unwrap_err();
         assert!(matches!(err, ConfigError::BadOverride(_)));
+    }
+
+    #[test]
+    fn a_refused_value_names_its_key() {
+        for (set, key) in [
+            (
+                "pipeline.refit.min_model_inliers=1.5",
+                "pipeline.refit.min_model_inliers: ",
+            ),
+            (
+                "pipeline.model_icp.normal_k=2",
+                "pipeline.model_icp.normal_k: ",
+            ),
+            ("pipeline.model_icp.steps=0", "pipeline.model_icp.steps: "),
+            ("membrane.fit.alpha=\"x\"", "membrane.fit.alpha: "),
+        ] {
+            let err = Config::load(None, &[set.into()]).unwrap_err();
+            assert!(err.to_string().contains(key), "{set}: {err}");
+        }
     }
 
     #[test]

@@ -12,6 +12,7 @@ use crate::cloud::Vec3;
 use crate::spatial::KnnIndex;
 use nalgebra::{Matrix3, SymmetricEigen};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 /// Errors of the normal estimation.
@@ -37,6 +38,44 @@ pub enum NormalsError {
     },
 }
 
+/// How many nearest neighbours give a point's normal: at least 3 (a
+/// plane), checked when the configuration is parsed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(try_from = "usize", into = "usize")]
+pub struct NeighbourCount(usize);
+
+impl NeighbourCount {
+    /// The count.
+    pub fn get(self) -> usize {
+        self.0
+    }
+}
+
+impl Default for NeighbourCount {
+    /// 20 neighbours.
+    fn default() -> Self {
+        Self(20)
+    }
+}
+
+impl TryFrom<usize> for NeighbourCount {
+    type Error = String;
+
+    fn try_from(k: usize) -> Result<Self, Self::Error> {
+        if k >= 3 {
+            Ok(Self(k))
+        } else {
+            Err(format!("{k} neighbours cannot give a normal (at least 3)"))
+        }
+    }
+}
+
+impl From<NeighbourCount> for usize {
+    fn from(k: NeighbourCount) -> Self {
+        k.0
+    }
+}
+
 /// Unit normal of every point from its `k` nearest neighbours (`k` is clamped
 /// to the cloud size). A degenerate neighbourhood (all neighbours on one
 /// point) gets the z axis.
@@ -58,21 +97,49 @@ pub fn estimate_normals_from(index: &KnnIndex, k: usize) -> Result<Vec<Vec3>, No
     let qty = k.min(points.len());
     Ok(points
         .par_iter()
-        .map(|q| {
-            let nn = index.nearest_n(q, qty);
-            let mut mean = Vec3::zeros();
-            for &(_, m) in &nn {
-                mean += points[m];
-            }
-            mean /= nn.len() as f64;
-            let mut cov = Matrix3::<f64>::zeros();
-            for &(_, m) in &nn {
-                let d = points[m] - mean;
-                cov += d * d.transpose();
-            }
-            smallest_eigenvector(cov)
+        .map(|q| normal_at(index, q, qty))
+        .collect())
+}
+
+/// [`estimate_normals_from`] at the points of `index` whose entry in
+/// `wanted` is true; the others get the zero vector. `wanted` shorter than
+/// the points leaves the rest out.
+///
+/// # Errors
+/// As [`estimate_normals`].
+pub fn estimate_normals_where(
+    index: &KnnIndex,
+    k: usize,
+    wanted: &[bool],
+) -> Result<Vec<Vec3>, NormalsError> {
+    let points = index.points();
+    check(points, k)?;
+    let qty = k.min(points.len());
+    Ok(points
+        .par_iter()
+        .enumerate()
+        .map(|(i, q)| match wanted.get(i) {
+            Some(true) => normal_at(index, q, qty),
+            _ => Vec3::zeros(),
         })
         .collect())
+}
+
+/// The unit normal at `q` from its `qty` nearest points of `index`.
+fn normal_at(index: &KnnIndex, q: &Vec3, qty: usize) -> Vec3 {
+    let points = index.points();
+    let nn = index.nearest_n(q, qty);
+    let mut mean = Vec3::zeros();
+    for &(_, m) in &nn {
+        mean += points[m];
+    }
+    mean /= nn.len() as f64;
+    let mut cov = Matrix3::<f64>::zeros();
+    for &(_, m) in &nn {
+        let d = points[m] - mean;
+        cov += d * d.transpose();
+    }
+    smallest_eigenvector(cov)
 }
 
 /// The checks of [`estimate_normals`]: `k ≥ 3`, three points or more, all finite.
@@ -126,6 +193,27 @@ mod tests {
         for n in estimate_normals(&plane, 8).unwrap() {
             assert!((n.z.abs() - 1.0).abs() < 1e-9, "{n:?}");
         }
+    }
+
+    #[test]
+    fn only_the_wanted_points_get_a_normal() {
+        let pts = crate::shapes::fibonacci_sphere(500);
+        let index = KnnIndex::new(pts);
+        let all = estimate_normals_from(&index, 10).unwrap();
+        let wanted: Vec<bool> = (0..400).map(|i| i % 3 == 0).collect();
+        let some = estimate_normals_where(&index, 10, &wanted).unwrap();
+        assert_eq!(some.len(), all.len());
+        for (i, (n, m)) in some.iter().zip(&all).enumerate() {
+            if wanted.get(i) == Some(&true) {
+                assert_eq!(n, m, "point {i}");
+            } else {
+                assert_eq!(*n, Vec3::zeros(), "point {i}");
+            }
+        }
+        assert_eq!(
+            NeighbourCount::try_from(2),
+            Err("2 neighbours cannot give a normal (at least 3)".to_string())
+        );
     }
 
     #[test]

@@ -60,6 +60,8 @@ pub struct Alignment {
 /// `trim` is the largest match distance kept; `max_points` caps the number of
 /// data points used per step (evenly strided). `normals`, when given, must
 /// be as many as the vertices (otherwise point-to-point steps are used).
+/// The alignment ends early once a step moves the motion by less than
+/// 0.06° and 1 % of `trim` ([`converged`]).
 pub fn align(
     index: &KnnIndex,
     normals: Option<&[Vec3]>,
@@ -121,6 +123,10 @@ pub fn align(
             None => kabsch(model, &matches),
         };
         match next {
+            Some(m) if converged(&motion, &m, trim) => {
+                out.motion = m;
+                break;
+            }
             Some(m) => motion = m,
             None => break,
         }
@@ -179,6 +185,62 @@ pub fn inlier_share(
 ) -> f64 {
     align(index, None, data, *motion, 0, trim, max_points).inlier_fraction
 }
+
+/// [`align`] onto a point set without normals (the fused model's points):
+/// the points that the data's sampled points match at `initial` (within
+/// `trim`) get a normal from their `normal_k` nearest neighbours, and the
+/// steps are point-to-plane on them (a point matched only after a step has
+/// no normal and is left out of the step). `None` when the normals cannot
+/// be estimated (fewer than 3 points, `normal_k < 3`).
+///
+/// Estimating only the matched points' normals keeps the step cheap on a
+/// large model: on a fused rounded box of 5.5–11 k points, normals at
+/// every point (k = 20) took 5–12 ms per frame, at the ~1 100 matched ones
+/// 2.4 ms on one thread (10 steps on 1 000 points: 2.2 ms).
+pub fn align_to_points(
+    index: &KnnIndex,
+    data: &[Vec3],
+    initial: Rigid,
+    steps: usize,
+    trim: f64,
+    max_points: usize,
+    normal_k: usize,
+) -> Option<Alignment> {
+    let inv = initial.inverse();
+    let stride = (data.len() / max_points.max(1)).max(1);
+    let mut wanted = vec![false; index.len()];
+    for q in data.iter().step_by(stride) {
+        let (d2, vertex) = index.nearest_one(&inv.transform_point(&(*q).into()).coords);
+        if d2 <= trim * trim {
+            wanted[vertex] = true;
+        }
+    }
+    let normals = crate::normals::estimate_normals_where(index, normal_k, &wanted).ok()?;
+    Some(align(
+        index,
+        Some(&normals),
+        data,
+        initial,
+        steps,
+        trim,
+        max_points,
+    ))
+}
+
+/// A step that moves the motion by less than [`CONVERGED_ROTATION`] and
+/// [`CONVERGED_SHIFT`]·`trim` ends the alignment: the next step would
+/// match the same points again.
+fn converged(from: &Rigid, to: &Rigid, trim: f64) -> bool {
+    let step = to * from.inverse();
+    step.rotation.angle() < CONVERGED_ROTATION
+        && step.translation.vector.norm() < CONVERGED_SHIFT * trim
+}
+
+/// Rotation of a converged step, in radians (0.06°).
+const CONVERGED_ROTATION: f64 = 1e-3;
+
+/// Translation of a converged step, as a share of the trimming radius.
+const CONVERGED_SHIFT: f64 = 1e-2;
 
 /// A new point matched to its nearest model vertex.
 #[derive(Debug, Clone, Copy)]
@@ -394,6 +456,29 @@ mod tests {
         // Normals of the wrong length fall back to point-to-point.
         let fallback = align(&index, Some(&normals[1..]), &data, init, 5, 0.2, 300);
         assert_eq!(fallback.motion, point.motion);
+    }
+
+    #[test]
+    fn a_point_model_without_normals_aligns_point_to_plane() {
+        // The fused model comes without normals: `align_to_points`
+        // estimates them at the matched points and recovers the rotation
+        // as well as point-to-plane steps on the true normals.
+        let model = sphere_points(1200, 3);
+        let truth = Rigid::new(Vec3::new(0.02, -0.01, 0.015), Vec3::new(0.02, 0.05, 0.03));
+        let data = partial_view(6000, 4, &truth);
+        let angle_error = |m: &Rigid| (m.rotation.inverse() * truth.rotation).angle();
+        let index = KnnIndex::new(model);
+        let init = Rigid::identity();
+        let a = align_to_points(&index, &data, init, 10, 0.2, 300, 20).unwrap();
+        let point = align(&index, None, &data, init, 10, 0.2, 300);
+        let (e, e_point) = (angle_error(&a.motion), angle_error(&point.motion));
+        assert!(
+            e < 0.015 && e < 0.5 * e_point,
+            "rotation error: estimated normals {e}, point-to-point {e_point}"
+        );
+        assert!(a.steps < 10, "no convergence in {} steps", a.steps);
+        // Too few neighbours for a normal: no alignment.
+        assert!(align_to_points(&index, &data, init, 10, 0.2, 300, 2).is_none());
     }
 
     #[test]

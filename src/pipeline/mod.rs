@@ -11,7 +11,10 @@
 //! 3. for a warm start, compensates the motion: a few rigid point-to-plane
 //!    ICP steps of the previous surface onto the new points from the
 //!    centroid shift, and from the last motion and from rest when those fit
-//!    clearly better ([`align`]); when the aligned surface still explains
+//!    clearly better ([`align`]), then refines that motion against the
+//!    fused model's points (`model_icp`, [`align::align_to_points`]: the
+//!    model holds every view and does not drift with the warm chain);
+//!    when the aligned surface still explains
 //!    fewer than `icp_min_inliers` of the points, the frame starts cold: on
 //!    the fused model, which it keeps, when the model explains that share
 //!    under the same motion (a **refit**: the surface was lost, not the
@@ -48,6 +51,7 @@ use crate::spline::ClosedSurface;
 use serde::{Deserialize, Serialize};
 use std::borrow::Cow;
 use std::fmt;
+use std::num::NonZeroUsize;
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
@@ -104,6 +108,11 @@ pub struct PipelineConfig {
     /// explains starts cold on the model and keeps it ([`PathReason::Refit`]);
     /// `None` (null): it loses the track.
     pub refit: Option<RefitConfig>,
+    /// With `model`: the motion of a frame, once aligned on the previous
+    /// surface, is refined against the fused model's points
+    /// ([`align::align_to_points`]); `None` (null): the previous surface
+    /// alone gives the motion.
+    pub model_icp: Option<ModelIcpConfig>,
     /// `membrane.prepare.density_sample` of warm-started frames (0: the membrane's own).
     pub warm_density_sample: usize,
     /// Marker namespace.
@@ -146,6 +155,7 @@ impl Default for PipelineConfig {
             refit: Some(RefitConfig {
                 min_model_inliers: Share(0.75),
             }),
+            model_icp: Some(ModelIcpConfig::default()),
             warm_density_sample: 256,
             marker_namespace: "sepmem".into(),
             score_samples: 10_000,
@@ -167,6 +177,35 @@ impl Default for PipelineConfig {
 pub struct RefitConfig {
     /// Least share of the frame's sampled points the model must explain.
     pub min_model_inliers: Share,
+}
+
+/// `pipeline.model_icp`: registration of each frame against the fused
+/// model, which holds every view seen so far, rather than only against the
+/// previous surface, which drifts with the warm chain (issue "the robot's
+/// view", tracking that does not drift).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelIcpConfig {
+    /// Point-to-plane steps.
+    pub steps: NonZeroUsize,
+    /// Match trimming radius, as a share of the object size.
+    pub trim: Share,
+    /// At most this many of the frame's points are matched per step.
+    pub max_points: NonZeroUsize,
+    /// Neighbours of a model point that give its normal.
+    pub normal_k: crate::normals::NeighbourCount,
+}
+
+impl Default for ModelIcpConfig {
+    fn default() -> Self {
+        Self {
+            // 10 steps on at most 500 points.
+            steps: NonZeroUsize::MIN.saturating_add(9),
+            trim: Share(0.03),
+            max_points: NonZeroUsize::MIN.saturating_add(499),
+            normal_k: crate::normals::NeighbourCount::default(),
+        }
+    }
 }
 
 /// A share in (0, 1], checked when the configuration is parsed.
@@ -728,29 +767,6 @@ impl Tracker {
         self.fused = Some(Fused { model, pose });
     }
 
-    /// The share of the frame's points the fused model explains under
-    /// `motion` (its points in the previous frame's cloud frame, within
-    /// `trim`); `None` without a model, or when the previous surface was a
-    /// refit already.
-    fn model_inliers(
-        &self,
-        prev: &Previous,
-        cloud: &PointCloud,
-        motion: &align::Rigid,
-        trim: f64,
-        max_points: usize,
-    ) -> Option<f64> {
-        let f = self.fused.as_ref().filter(|_| !prev.refitted)?;
-        let index = KnnIndex::new(f.model.points_in(&f.pose));
-        Some(align::inlier_share(
-            &index,
-            &cloud.points,
-            motion,
-            trim,
-            max_points,
-        ))
-    }
-
     fn choose_path(
         &self,
         cloud: &PointCloud,
@@ -800,12 +816,28 @@ impl Tracker {
             cfg.icp_max_points,
         );
         let inliers = alignment.map_or(1.0, |a| a.inlier_fraction);
-        if cfg.icp_min_inliers.is_some_and(|m| inliers < m.get()) {
-            let refit = alignment.zip(cfg.refit.as_ref()).and_then(|(a, r)| {
-                let trim = cfg.icp_trim * scale;
-                let model = self.model_inliers(prev, cloud, &a.motion, trim, cfg.icp_max_points)?;
-                (model >= r.min_model_inliers.get()).then_some((model, a.motion))
-            });
+        let lost = cfg.icp_min_inliers.is_some_and(|m| inliers < m.get());
+        // The fused model's points in the previous frame's cloud frame.
+        let fused = self
+            .fused
+            .as_ref()
+            .filter(|_| lost || cfg.model_icp.is_some())
+            .map(|f| KnnIndex::new(f.model.points_in(&f.pose)));
+        let motion = alignment.map_or(shift, |a| a.motion);
+        let motion = match (&fused, &cfg.model_icp) {
+            (Some(index), Some(mi)) => on_model(index, cloud, motion, mi, scale),
+            _ => motion,
+        };
+        if lost {
+            let refit = fused
+                .as_ref()
+                .filter(|_| alignment.is_some() && !prev.refitted)
+                .zip(cfg.refit.as_ref())
+                .and_then(|(index, r)| {
+                    let (trim, max) = (cfg.icp_trim * scale, cfg.icp_max_points);
+                    let model = align::inlier_share(index, &cloud.points, &motion, trim, max);
+                    (model >= r.min_model_inliers.get()).then_some((model, motion))
+                });
             return match refit {
                 Some((model, motion)) => (
                     StartPath::Cold,
@@ -819,7 +851,6 @@ impl Tracker {
                 None => cold(PathReason::LostTrack { inliers }),
             };
         }
-        let motion = alignment.map_or(shift, |a| a.motion);
         match prev.surface.rigidly_moved(&motion) {
             Ok(surface) => (
                 StartPath::Warm,
@@ -834,6 +865,35 @@ impl Tracker {
         }
     }
 }
+
+/// `motion` refined against the fused model's points `index`
+/// (`pipeline.model_icp`); kept as it is when fewer than
+/// [`MIN_MODEL_MATCHES`] of the frame's sampled points match the model.
+fn on_model(
+    index: &KnnIndex,
+    cloud: &PointCloud,
+    motion: align::Rigid,
+    cfg: &ModelIcpConfig,
+    scale: f64,
+) -> align::Rigid {
+    let a = align::align_to_points(
+        index,
+        &cloud.points,
+        motion,
+        cfg.steps.get(),
+        cfg.trim.get() * scale,
+        cfg.max_points.get(),
+        cfg.normal_k.get(),
+    );
+    a.filter(|a| a.inlier_fraction >= MIN_MODEL_MATCHES)
+        .map_or(motion, |a| a.motion)
+}
+
+/// Least share of a frame's sampled points matched to the fused model for
+/// its registration to replace the previous surface's motion: a model that
+/// explains less of the frame (a swapped object, a model from a lost
+/// track) does not steer it.
+const MIN_MODEL_MATCHES: f64 = 0.5;
 
 /// The membranes a frame pipeline uses, built once from the `membrane`
 /// section: one for cold starts, and its variant for warm-started frames
