@@ -324,7 +324,10 @@ pub fn cold_references(
     (0..repeats as u64)
         .map(|k| {
             let thinned = crate::pipeline::thinned_subset(cloud, pipeline, k);
-            membrane.reconstruct(&thinned, &budget, &crate::membrane::Start::Cold)
+            let mut rec = membrane.reconstruct(&thinned, &budget, &crate::membrane::Start::Cold)?;
+            // As the pipeline publishes its frames (`membrane.step.unbias`).
+            rec.unbias_mesh();
+            Ok(rec)
         })
         .collect()
 }

@@ -251,6 +251,24 @@ pub struct StepConfig {
     pub attributes: Vec<AttributeWeight>,
     /// Worker threads for the per-sample search (0 = all cores, 1 = serial).
     pub threads: usize,
+    /// The outward move of each vertex of a published frame mesh that
+    /// removes the centring's curvature bias ([`super::unbias`]); `None`
+    /// publishes the membrane's surface as it is.
+    pub unbias: Option<UnbiasConfig>,
+}
+
+/// `membrane.step.unbias`: the bound of the curvature-bias move.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UnbiasConfig {
+    /// Largest move, in multiples of δ.
+    pub max_delta: f64,
+}
+
+impl Default for UnbiasConfig {
+    fn default() -> Self {
+        Self { max_delta: 0.25 }
+    }
 }
 
 impl Default for StepConfig {
@@ -271,6 +289,7 @@ impl Default for StepConfig {
             spatial_weight: 1.0,
             attributes: Vec::new(),
             threads: 0,
+            unbias: Some(UnbiasConfig::default()),
         }
     }
 }
@@ -690,6 +709,11 @@ fn validate_init(i: &InitConfig) -> Result<(), ConfigError> {
 
 fn validate_step(s: &StepConfig) -> Result<(), ConfigError> {
     check(s.boundaries > 0, "step.boundaries", "must be at least 1")?;
+    check(
+        s.unbias.as_ref().is_none_or(|u| pos(u.max_delta)),
+        "step.unbias.max_delta",
+        "must be positive",
+    )?;
     check(
         s.beta > 0.0 && s.beta <= 1.0,
         "step.beta",

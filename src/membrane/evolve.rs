@@ -25,6 +25,7 @@ use super::prepare::Prepared;
 use super::regularize::{self, Samples};
 use super::schedule::{Next, Schedule};
 use super::step::{Pass, SampleOut, Stepper, ThreadScratch};
+use super::unbias;
 use super::view::Seen;
 use super::{
     init, Budget, MembraneError, PhaseTimes, Reconstruction, Report, StopReason, WarmStart,
@@ -296,6 +297,10 @@ fn finish(
     };
     let eta_final = eta.iter().sum::<f64>() / eta.len().max(1) as f64;
     let mesh = extract_mesh(&surface, &layout, &eta);
+    let unbias = stepper.cfg.unbias.as_ref().map_or_else(Vec::new, |u| {
+        let (d, cmax) = (stepper.delta, stepper.cross_max);
+        unbias::centring_bias(&surface, &layout, stepper.cfg, d, cmax, u.max_delta)
+    });
     times.mesh_ms = ms(t_mesh);
     times.total_ms = prep.prepare_ms + ms(t_start);
     let c = prep.counts;
@@ -330,6 +335,7 @@ fn finish(
         mesh,
         surface,
         report,
+        unbias,
     })
 }
 

@@ -43,6 +43,7 @@ pub mod regularize;
 pub mod schedule;
 pub mod spacing;
 pub mod step;
+pub mod unbias;
 pub mod view;
 
 pub use config::{
@@ -53,7 +54,7 @@ pub use config::{
 };
 pub use extract::{extract_mesh, SEPARABILITY_CHANNEL};
 
-use crate::cloud::{CloudError, PointCloud};
+use crate::cloud::{CloudError, PointCloud, Vec3};
 use crate::mesh::TriMesh;
 use crate::spline::{ClosedSurface, SplineError};
 use fit::FitCache;
@@ -249,9 +250,23 @@ pub struct Reconstruction {
     pub surface: ClosedSurface,
     /// What happened.
     pub report: Report,
+    /// Per mesh vertex, the outward move that removes the curvature bias of
+    /// the centring ([`unbias`], `step.unbias`); not applied to `mesh` (see
+    /// [`Self::unbias_mesh`]); empty when off.
+    pub unbias: Vec<Vec3>,
 }
 
 impl Reconstruction {
+    /// Apply [`Self::unbias`] to the mesh (once: it is emptied).
+    pub fn unbias_mesh(&mut self) {
+        if self.unbias.len() == self.mesh.vertices.len() {
+            for (v, m) in self.mesh.vertices.iter_mut().zip(&self.unbias) {
+                *v += m;
+            }
+        }
+        self.unbias.clear();
+    }
+
     /// A warm start for the next reconstruction of the same object.
     pub fn warm_start(&self) -> WarmStart {
         WarmStart {

@@ -716,6 +716,9 @@ impl Tracker {
             motion: motion.unwrap_or_else(align::Rigid::identity),
             refitted: matches!(reason, PathReason::Refit { .. }),
         });
+        // The published mesh without the centring's curvature bias; the
+        // alignment above and the next warm start keep the surface's own.
+        rec.unbias_mesh();
         Ok(FrameResult {
             stream: self.key.clone(),
             frame,
