@@ -776,12 +776,7 @@ impl Tracker {
         centroid: Vec3,
         size: f64,
         cfg: &PipelineConfig,
-    ) -> (
-        StartPath,
-        PathReason,
-        Option<WarmStart>,
-        Option<align::Rigid>,
-    ) {
+    ) -> Choice {
         let cold = |reason| (StartPath::Cold, reason, None, None);
         if !cfg.warm_start {
             return cold(PathReason::WarmDisabled);
@@ -801,23 +796,7 @@ impl Tracker {
             centroid.y - prev.centroid.y,
             centroid.z - prev.centroid.z,
         );
-        // From the centroid's shift; then from the last frame's motion
-        // (constant velocity) and from rest, when the shift is no start at
-        // all (align.rs, align_from).
-        let starts: &[align::Rigid] = if cfg.icp_steps > 0 {
-            &[shift, prev.motion, align::Rigid::identity()]
-        } else {
-            &[shift]
-        };
-        let alignment = align::align_from(
-            &prev.model,
-            Some(&prev.normals),
-            &cloud.points,
-            starts,
-            cfg.icp_steps,
-            cfg.icp_trim * scale,
-            cfg.icp_max_points,
-        );
+        let alignment = on_previous(prev, cloud, shift, scale, cfg);
         let inliers = alignment.map_or(1.0, |a| a.inlier_fraction);
         let lost = cfg.icp_min_inliers.is_some_and(|m| inliers < m.get());
         // The fused model's points in the previous frame's cloud frame.
@@ -832,27 +811,10 @@ impl Tracker {
             _ => motion,
         };
         if lost {
-            let refit = fused
+            let fused = fused
                 .as_ref()
-                .filter(|_| alignment.is_some() && !prev.refitted)
-                .zip(cfg.refit.as_ref())
-                .and_then(|(index, r)| {
-                    let (trim, max) = (cfg.icp_trim * scale, cfg.icp_max_points);
-                    let model = align::inlier_share(index, &cloud.points, &motion, trim, max);
-                    (model >= r.min_model_inliers.get()).then_some((model, motion))
-                });
-            return match refit {
-                Some((model, motion)) => (
-                    StartPath::Cold,
-                    PathReason::Refit {
-                        surface: inliers,
-                        model,
-                    },
-                    None,
-                    Some(motion),
-                ),
-                None => cold(PathReason::LostTrack { inliers }),
-            };
+                .filter(|_| alignment.is_some() && !prev.refitted);
+            return refit_or_lost(fused, cloud, motion, inliers, scale, cfg);
         }
         match prev.surface.rigidly_moved(&motion) {
             Ok(surface) => (
@@ -866,6 +828,78 @@ impl Tracker {
             ),
             Err(_) => cold(PathReason::FirstFrame),
         }
+    }
+}
+
+/// A frame's start path, why, its warm start and the motion that moved the
+/// object since the previous frame.
+type Choice = (
+    StartPath,
+    PathReason,
+    Option<WarmStart>,
+    Option<align::Rigid>,
+);
+
+/// The previous surface aligned onto the frame's points: from the
+/// centroid's `shift`, then from the last frame's motion (constant
+/// velocity) and from rest, when the shift is no start at all
+/// ([`align::align_from`]).
+fn on_previous(
+    prev: &Previous,
+    cloud: &PointCloud,
+    shift: align::Rigid,
+    scale: f64,
+    cfg: &PipelineConfig,
+) -> Option<align::Alignment> {
+    let starts: &[align::Rigid] = if cfg.icp_steps > 0 {
+        &[shift, prev.motion, align::Rigid::identity()]
+    } else {
+        &[shift]
+    };
+    align::align_from(
+        &prev.model,
+        Some(&prev.normals),
+        &cloud.points,
+        starts,
+        cfg.icp_steps,
+        cfg.icp_trim * scale,
+        cfg.icp_max_points,
+    )
+}
+
+/// The start of a frame the aligned previous surface no longer explains
+/// (`inliers` below `icp_min_inliers`): a refit on the fused model's points
+/// `fused` when they explain at least `refit.min_model_inliers` of the
+/// frame under `motion`, else a lost track.
+fn refit_or_lost(
+    fused: Option<&KnnIndex>,
+    cloud: &PointCloud,
+    motion: align::Rigid,
+    inliers: f64,
+    scale: f64,
+    cfg: &PipelineConfig,
+) -> Choice {
+    let (trim, max) = (cfg.icp_trim * scale, cfg.icp_max_points);
+    let refit = fused.zip(cfg.refit.as_ref()).and_then(|(index, r)| {
+        let model = align::inlier_share(index, &cloud.points, &motion, trim, max);
+        (model >= r.min_model_inliers.get()).then_some(model)
+    });
+    match refit {
+        Some(model) => (
+            StartPath::Cold,
+            PathReason::Refit {
+                surface: inliers,
+                model,
+            },
+            None,
+            Some(motion),
+        ),
+        None => (
+            StartPath::Cold,
+            PathReason::LostTrack { inliers },
+            None,
+            None,
+        ),
     }
 }
 
