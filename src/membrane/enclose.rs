@@ -58,16 +58,10 @@ pub fn enclose(
     margin: f64,
     pad: f64,
 ) -> Result<usize, SplineError> {
-    let layout = fit.layout().clone();
+    let layout = fit.layout();
     let (un, vn) = (layout.u_n(), layout.v_n());
-    let (mut samples, mut normals) = (Vec::with_capacity(un * vn), Vec::with_capacity(un * vn));
-    for j in 0..vn {
-        for i in 0..un {
-            let sp = surface.eval_at(&layout, i, j);
-            normals.push(surface.normal(&sp));
-            samples.push(sp.p);
-        }
-    }
+    let (mut samples, mut normals) = (Vec::new(), Vec::new());
+    surface.eval_grid(layout, &mut samples, &mut normals);
     let index = KnnIndex::new(samples.clone());
     let mut push = vec![0.0f64; samples.len()];
     for x in points {

@@ -137,10 +137,7 @@ impl Stepper<'_> {
         let (layout, depth) = (pass.layout, pass.depth);
         let sp = pass.surface.eval_at(layout, i, j);
         let still = unsearched(pass.surface, &sp, SampleState::Still);
-        let cmin = cfg.cross_min_delta * self.delta;
-        let cmax = self.cross_max.max(cmin);
-        let w = (sp.su.norm() / layout.u_n() as f64 * cfg.cross_scale).clamp(cmin, cmax);
-        let h = (sp.sv.norm() / layout.v_n() as f64 * cfg.cross_scale).clamp(cmin, cmax);
+        let (w, h) = cross_section(cfg, self.delta, self.cross_max, &sp, layout);
         let mut cub = Cuboid::new(sp.p, still.n, w, h, depth);
         if sp.su.norm_squared() > 0.0 {
             cub = cub.with_tangent(sp.su);
@@ -299,6 +296,23 @@ impl Stepper<'_> {
                 }
             });
     }
+}
+
+/// The cross-section `M_w × M_h` of the cuboid at the sample `sp` of
+/// `layout`: the sample spacing times `cross_scale`, at least
+/// `cross_min_delta`·δ and at most `cross_max` (input units).
+pub(crate) fn cross_section(
+    cfg: &StepConfig,
+    delta: f64,
+    cross_max: f64,
+    sp: &SurfacePoint,
+    layout: &Layout,
+) -> (f64, f64) {
+    let cmin = cfg.cross_min_delta * delta;
+    let cmax = cross_max.max(cmin);
+    let w = (sp.su.norm() / layout.u_n() as f64 * cfg.cross_scale).clamp(cmin, cmax);
+    let h = (sp.sv.norm() / layout.v_n() as f64 * cfg.cross_scale).clamp(cmin, cmax);
+    (w, h)
 }
 
 /// A sample at `sp` that does not move (yet): its point and unit normal,

@@ -32,6 +32,7 @@
 //! unchanged; F rose on 22 of the 23.
 
 use super::config::StepConfig;
+use super::step::cross_section;
 use crate::cloud::Vec3;
 use crate::spline::{ClosedSurface, Layout};
 
@@ -66,8 +67,6 @@ pub(crate) fn centring_bias(
             0.0
         }
     };
-    let cmin = step.cross_min_delta * delta;
-    let cmax = cross_max.max(cmin);
     let bound = max_delta * delta;
     let mut moves = Vec::with_capacity(un * vn + 2);
     for j in 0..vn {
@@ -80,9 +79,7 @@ pub(crate) fn centring_bias(
                 0.0
             };
             let (sp, n) = &samples[j * un + i];
-            // The cross-section of the sample's search (step.rs).
-            let w = (sp.su.norm() / un as f64 * step.cross_scale).clamp(cmin, cmax);
-            let h = (sp.sv.norm() / vn as f64 * step.cross_scale).clamp(cmin, cmax);
+            let (w, h) = cross_section(step, delta, cross_max, sp, layout);
             let b = 0.5 * (k_u + k_v) * w * h / (8.0 * std::f64::consts::PI);
             moves.push(n * b.clamp(-bound, bound));
         }
