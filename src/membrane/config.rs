@@ -232,6 +232,9 @@ pub struct StepConfig {
     /// Accept a boundary only where the inner region is the denser one
     /// (μ1 ≥ μ2); `None` accepts every boundary.
     pub inside_denser: Option<InsideDenserConfig>,
+    /// A sample facing away from every camera that saw the points takes no
+    /// force from them ([`super::step`]); `None` lets every sample search.
+    pub facing_away: Option<FacingAwayConfig>,
     /// Dense-side significance: the band must hold this fraction of the
     /// expected surface count `M_w·M_h/δ²`.
     pub significance: f64,
@@ -282,6 +285,7 @@ impl Default for StepConfig {
             band_inner_delta: 2.0,
             band_outer_delta: 1.0,
             inside_denser: Some(InsideDenserConfig::default()),
+            facing_away: None,
             significance: 0.3,
             sparse_warm_search: true,
             sparse_cold_search: true,
@@ -290,6 +294,39 @@ impl Default for StepConfig {
             attributes: Vec::new(),
             threads: 0,
             unbias: Some(UnbiasConfig::default()),
+        }
+    }
+}
+
+/// `membrane.step.facing_away`: when a sample faces away from the cameras.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FacingAwayConfig {
+    /// A sample of a warm start faces away from a camera when the cosine
+    /// of the angle between its outward normal and the direction to the
+    /// camera is at most this, in [-1, 1).
+    pub max_cos: f64,
+    /// The same bound for a cold start, whose initial octagon's facets do
+    /// not follow the object, in [-1, 1).
+    pub cold_max_cos: f64,
+}
+
+impl Default for FacingAwayConfig {
+    fn default() -> Self {
+        Self {
+            max_cos: 0.0,
+            cold_max_cos: -0.8,
+        }
+    }
+}
+
+impl FacingAwayConfig {
+    /// The bound for a warm or a cold start.
+    pub fn bound(&self, warm: bool) -> f64 {
+        if warm {
+            self.max_cos
+        } else {
+            self.cold_max_cos
         }
     }
 }
@@ -735,6 +772,12 @@ fn validate_step(s: &StepConfig) -> Result<(), ConfigError> {
         "step.inside_denser.inner_margin",
         "must be in [0, 0.5)",
     )?;
+    let facing = s.facing_away.clone().unwrap_or_default();
+    let cosines = [
+        ("step.facing_away.max_cos", facing.max_cos),
+        ("step.facing_away.cold_max_cos", facing.cold_max_cos),
+    ];
+    check_each(&cosines, |c| (-1.0..1.0).contains(&c), "must be in [-1, 1)")?;
     let finite = [
         ("step.band_inner_delta", s.band_inner_delta),
         ("step.band_outer_delta", s.band_outer_delta),

@@ -42,6 +42,7 @@ const STRETCH_RINGS: usize = 16;
 fn stepper<'a>(
     prep: &'a Prepared<'_>,
     cfg: &'a MembraneConfig,
+    warm: bool,
 ) -> Result<Stepper<'a>, MembraneError> {
     let delta = match (cfg.prepare.search_delta, prep.spacing.as_deref()) {
         (SearchDelta::Local, _) => Delta::Local(&prep.d_used),
@@ -63,6 +64,8 @@ fn stepper<'a>(
         cross_max: cfg.step.cross_max * prep.scale,
         center: prep.points.iter().sum::<Vec3>() / prep.points.len() as f64,
         reach: prep.scale,
+        facing: cfg.step.facing_away.as_ref().map(|f| f.bound(warm)),
+        eyes: prep.seen().fused_eyes(),
     })
 }
 
@@ -107,7 +110,7 @@ pub(crate) fn evolve(
         init_ms: ms(t_init),
         ..PhaseTimes::default()
     };
-    let stepper = stepper(prep, cfg)?;
+    let stepper = stepper(prep, cfg, warm.is_some())?;
     let sc = &cfg.schedule;
     let floor = sc.depth_floor_delta * prep.delta;
     let depth = if warm.is_some() {

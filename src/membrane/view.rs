@@ -361,6 +361,15 @@ impl<'a> Seen<'a> {
         }
     }
 
+    /// The cameras of a fused cloud's views (none for a single view or
+    /// points from all around: see `step.facing_away`).
+    pub fn fused_eyes(&self) -> Vec<Vec3> {
+        match self {
+            Self::AllAround | Self::View(_) => Vec::new(),
+            Self::Views(f) => f.eyes(),
+        }
+    }
+
     /// Whether the inward force may take `p` for outside: anywhere without
     /// a view; with one, only where it was seen empty or lies beyond the
     /// completion's back; with fused views, only where one saw it empty.
@@ -393,6 +402,10 @@ pub trait FreeSpace: Sync {
 
     /// How many distinct views the model keeps.
     fn views_kept(&self) -> usize;
+
+    /// The cameras of the kept views and of the latest one, in the cloud's
+    /// frame.
+    fn eyes(&self) -> Vec<Vec3>;
 }
 
 /// The view of `points` for `viewpoint` (see the module docs): `None` for
@@ -509,6 +522,10 @@ mod tests {
 
             fn views_kept(&self) -> usize {
                 1
+            }
+
+            fn eyes(&self) -> Vec<Vec3> {
+                vec![self.0.eye()]
             }
         }
         let views = Views(&vb);

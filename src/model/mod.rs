@@ -432,6 +432,16 @@ impl FreeSpace for Carving<'_> {
     fn views_kept(&self) -> usize {
         self.model.views.views().len()
     }
+
+    fn eyes(&self) -> Vec<Vec3> {
+        let latest = self.model.latest.as_ref().map(DepthView::eye);
+        let kept = self.model.views.views().iter().map(DepthView::eye);
+        latest
+            .into_iter()
+            .chain(kept)
+            .map(|e| self.to_object.inverse_transform_point(&e.into()).coords)
+            .collect()
+    }
 }
 
 #[cfg(test)]

@@ -93,7 +93,7 @@ pub fn figure(text: &str, label: &str) -> f64 {
         .find(label)
         .unwrap_or_else(|| panic!("no `{label}` in {text}"));
     text[at + label.len()..]
-        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .split(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-'))
         .next()
         .and_then(|w| w.parse().ok())
         .unwrap_or_else(|| panic!("no figure after `{label}` in {text}"))
