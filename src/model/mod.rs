@@ -419,8 +419,7 @@ impl FreeSpace for Carving<'_> {
     }
 
     fn latest_eye(&self) -> Option<Vec3> {
-        let eye = self.model.latest.as_ref()?.eye();
-        Some(self.to_object.inverse_transform_point(&eye.into()).coords)
+        Some(self.eye_in_cloud(self.model.latest.as_ref()?.eye()))
     }
 
     fn on_latest_surface(&self, p: &Vec3) -> bool {
@@ -439,8 +438,15 @@ impl FreeSpace for Carving<'_> {
         latest
             .into_iter()
             .chain(kept)
-            .map(|e| self.to_object.inverse_transform_point(&e.into()).coords)
+            .map(|e| self.eye_in_cloud(e))
             .collect()
+    }
+}
+
+impl Carving<'_> {
+    /// A camera position of the model's views, in the cloud's frame.
+    fn eye_in_cloud(&self, eye: Vec3) -> Vec3 {
+        self.to_object.inverse_transform_point(&eye.into()).coords
     }
 }
 
