@@ -25,7 +25,11 @@
 //!    deadline shared by all attempts of the frame;
 //! 5. falls back to a cold start within the same deadline when the warm
 //!    result's global separability η_g fell below a fraction of the previous
-//!    frame's (the warm start "failed"), and reports which path it took and why.
+//!    frame's (the warm start "failed"), and reports which path it took and why;
+//! 6. with `rebuild` (and `model`), hands a copy of the fused model to the
+//!    background rebuild ([`rebuild`]: a cold membrane on it, off the frame
+//!    path), whose surface a warm frame `lag_frames` later starts from
+//!    instead of the previous frame's (step 3, reason `rebuilt(age)`).
 //!
 //! Streams never share state, so an error in one cannot affect another.
 //! Replays of bags with ground truth are scored frame by frame with
@@ -36,6 +40,7 @@ pub mod collision;
 pub mod engine;
 pub mod objects;
 pub mod outputs;
+pub mod rebuild;
 
 pub use crate::stream::StreamKey;
 
@@ -113,6 +118,10 @@ pub struct PipelineConfig {
     /// ([`align::align_to_points`]); `None` (null): the previous surface
     /// alone gives the motion.
     pub model_icp: Option<ModelIcpConfig>,
+    /// With `model`: a cold membrane on the fused model runs in the
+    /// background, and a later warm frame starts from its surface
+    /// ([`rebuild`]); `None` (null): the warm chain alone.
+    pub rebuild: Option<rebuild::RebuildConfig>,
     /// `membrane.prepare.density_sample` of warm-started frames (0: the membrane's own).
     pub warm_density_sample: usize,
     /// Marker namespace.
@@ -156,6 +165,7 @@ impl Default for PipelineConfig {
                 min_model_inliers: Share(0.75),
             }),
             model_icp: Some(ModelIcpConfig::default()),
+            rebuild: Some(rebuild::RebuildConfig::default()),
             warm_density_sample: 256,
             marker_namespace: "sepmem".into(),
             score_samples: 10_000,
@@ -325,6 +335,13 @@ pub enum PathReason {
         /// The share the fused model matched.
         model: f64,
     },
+    /// Tracked, and started from the surface of the background rebuild
+    /// (`pipeline.rebuild`) that began `age` frames ago, not from the
+    /// previous frame's.
+    Rebuilt {
+        /// Frames since the rebuild started.
+        age: u64,
+    },
     /// A warm result failed one of the checks above, and its cold redo
     /// failed that check too: the frame itself separates worse (a thinner
     /// or edge-on view), and the warm result, which keeps what earlier
@@ -349,6 +366,7 @@ impl fmt::Display for PathReason {
             Self::Drifted { eta, reference } => write!(f, "drifted({eta:.3}<{reference:.3})"),
             Self::LostTrack { inliers } => write!(f, "lost_track({inliers:.2})"),
             Self::Refit { surface, model } => write!(f, "refit({surface:.2},model={model:.2})"),
+            Self::Rebuilt { age } => write!(f, "rebuilt({age})"),
             Self::WarmKept { eta, cold } => write!(f, "warm_kept({eta:.3},cold={cold:.3})"),
         }
     }
@@ -471,6 +489,8 @@ pub struct Tracker {
     key: StreamKey,
     previous: Option<Previous>,
     fused: Option<Fused>,
+    /// The background rebuild in flight (`pipeline.rebuild`).
+    rebuild: Option<rebuild::Pending>,
     stats: StreamStats,
 }
 
@@ -481,6 +501,7 @@ impl Tracker {
             key,
             previous: None,
             fused: None,
+            rebuild: None,
             stats: StreamStats::default(),
         }
     }
@@ -519,6 +540,7 @@ impl Tracker {
     pub fn reset(&mut self) {
         self.previous = None;
         self.fused = None;
+        self.rebuild = None;
     }
 
     /// Process one frame: decide the path, evolve under the budget, remember
@@ -592,8 +614,15 @@ impl Tracker {
         let centroid = cloud.centroid().unwrap_or_else(Vec3::zeros);
         let size = cloud.aabb().longest_edge();
 
-        let (path, mut reason, warm, motion) = self.choose_path(cloud, centroid, size, cfg);
+        let (path, mut reason, mut warm, motion) = self.choose_path(cloud, centroid, size, cfg);
         let fused = self.fuse(raw, path, motion, size, cfg);
+        if let Some(w) = warm.as_mut() {
+            if let Some(age) = self.adopt_rebuild(w, frame, deadline.is_none()) {
+                reason = PathReason::Rebuilt { age };
+            }
+        } else {
+            self.rebuild = None;
+        }
         let fused = fused.as_ref().map(|c| thinned(c, cfg));
         let input: &PointCloud = fused.as_deref().unwrap_or(cloud);
         let cap = match path {
@@ -716,6 +745,7 @@ impl Tracker {
             motion: motion.unwrap_or_else(align::Rigid::identity),
             refitted: matches!(reason, PathReason::Refit { .. }),
         });
+        self.start_rebuild(final_path, membranes, cfg, frame);
         // The published mesh without the centring's curvature bias; the
         // alignment above and the next warm start keep the surface's own.
         rec.unbias_mesh();
@@ -757,6 +787,47 @@ impl Tracker {
         }
         let f = self.fused.as_ref()?;
         Some(PointCloud::from_points(f.model.points_in(&f.pose)))
+    }
+
+    /// Start the warm frame `warm` from the stream's background rebuild
+    /// (`pipeline.rebuild`) when one may be adopted at `frame` (waiting
+    /// for it when `wait`), moved into this frame by the tracked pose, and
+    /// return how many frames ago it started.
+    fn adopt_rebuild(&mut self, warm: &mut WarmStart, frame: u64, wait: bool) -> Option<u64> {
+        let (pending, fused) = (self.rebuild.as_ref()?, self.fused.as_ref()?);
+        let surface = match pending.adopt(frame, wait) {
+            rebuild::Adopt::NotYet => return None,
+            rebuild::Adopt::Failed => None,
+            rebuild::Adopt::Surface(s) => s.rigidly_moved(&fused.pose).ok(),
+        };
+        let age = frame.saturating_sub(pending.started());
+        self.rebuild = None;
+        warm.surface = surface?;
+        Some(age)
+    }
+
+    /// After the frame, start the next background rebuild when none is in
+    /// flight. A cold frame first drops the one in flight: its model
+    /// restarted, or a refit just rebuilt it.
+    fn start_rebuild(
+        &mut self,
+        path: StartPath,
+        membranes: &Membranes,
+        cfg: &PipelineConfig,
+        frame: u64,
+    ) {
+        if path == StartPath::Cold {
+            self.rebuild = None;
+        }
+        let (Some(workers), Some(f)) = (&membranes.rebuild, &self.fused) else {
+            return;
+        };
+        if self.rebuild.is_none() {
+            let budget = Budget::iterations(cold_cap(membranes.cold.config(), cfg));
+            let model = f.model.clone();
+            let pending = workers.start(model, cfg.max_points, budget, frame);
+            self.rebuild = Some(pending);
+        }
     }
 
     /// A new model from this frame alone, in this frame's cloud frame.
@@ -941,6 +1012,9 @@ pub struct Membranes {
     pub cold: Membrane,
     /// Warm-started frames.
     pub warm: Membrane,
+    /// The background rebuilds' pool (`pipeline.rebuild`), shared by every
+    /// stream of the engine.
+    pub rebuild: Option<rebuild::Workers>,
 }
 
 impl Membranes {
@@ -955,7 +1029,15 @@ impl Membranes {
         } else {
             cold.clone()
         };
-        Ok(Self { cold, warm })
+        let rebuild = match (&cfg.rebuild, &cfg.model) {
+            (Some(r), Some(_)) => Some(rebuild::Workers::new(r, &cold, &warm)?),
+            _ => None,
+        };
+        Ok(Self {
+            cold,
+            warm,
+            rebuild,
+        })
     }
 }
 
