@@ -355,7 +355,7 @@ fn every_warm_frame_of_a_20000_point_sequence_reaches_the_cold_f_score_of_its_fr
     // warm chain, and warm frames fall behind the single-view cold start
     // from frame 12 on. Measured: dF mean +0.027, largest +0.094 (frames
     // 12-18: +0.05 to +0.09). Adopting a rebuild only when its η_g is at
-    // least the warm frame's halves the late gap (largest +0.064) but does
+    // least the warm frame's lowers the late gap (largest +0.064) but does
     // not close it. Held where it is, not accepted as the goal.
     let rebuilt = warm_vs_cold(&bag, "pipeline.model={}");
     let mean = rebuilt.iter().sum::<f64>() / rebuilt.len() as f64;

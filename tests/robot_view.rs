@@ -55,6 +55,14 @@ fn replay_with(name: &str, args: &[&str]) -> String {
     out
 }
 
+/// [`replay_with`] with the background rebuild off (`pipeline.rebuild`
+/// null): the warm chain the older mechanisms were measured in.
+fn without_rebuild(name: &str, args: &[&str]) -> String {
+    let mut all = vec!["--set", "pipeline.rebuild=null"];
+    all.extend_from_slice(args);
+    replay_with(name, &all)
+}
+
 /// The line of `out` that starts with `prefix`.
 fn line<'a>(out: &'a str, prefix: &str) -> &'a str {
     out.lines()
@@ -104,8 +112,8 @@ fn the_carved_model_closes_the_box_capsule_and_bent_tube() {
     // rebuild): box 0.892, 0.950, 1.18; capsule 0.687, 0.836, 1.21; bent
     // tube 0.748, 0.783, 1.43; orbited 0.885, 0.913, 1.49. Before the
     // rebuild: box 0.835, 0.939, 1.13; capsule 0.659, 0.813, 1.09; bent
-    // tube 0.740, 0.631, 1.39; orbited 0.873, 0.899, 1.30. Without the registration on the
-    // model: box 0.804, 0.926, 1.12; capsule 0.575, 0.851, 1.06; bent tube
+    // tube 0.740, 0.631, 1.39; orbited 0.873, 0.899, 1.30. Without the
+    // registration on the model: box 0.804, 0.926, 1.12; capsule 0.575, 0.851, 1.06; bent tube
     // 0.554, 0.560, 1.39; orbited 0.723, 0.564, 1.30. With the carving
     // alone: box 0.729, 0.881, 1.14; capsule 0.513, 0.702,
     // 1.11; bent tube 0.547, 0.611, 1.72; orbited 0.480, 0.566, 1.41.
@@ -144,18 +152,11 @@ fn a_refit_keeps_the_model_where_only_the_surface_was_lost() {
     // Without the background rebuild, which keeps the box's surface close
     // enough that no refit is needed (cold frames after the first 2 -> 0).
     let name = "turn_rounded_box";
-    let no_rebuild = ["--set", "pipeline.rebuild=null"];
-    let (off_f, off_iou, _) = closure(&replay_with(
+    let (off_f, off_iou, _) = closure(&without_rebuild(
         name,
-        &[
-            "-q",
-            no_rebuild[0],
-            no_rebuild[1],
-            "--set",
-            "pipeline.refit=null",
-        ],
+        &["-q", "--set", "pipeline.refit=null"],
     ));
-    let out = replay_with(name, &no_rebuild);
+    let out = without_rebuild(name, &[]);
     assert!(out.contains(" refit("), "{name}: no refit frame: {out}");
     assert!(!out.contains("lost_track("), "{name}: lost track: {out}");
     assert_meshed_within_the_cap(name, &out);
@@ -206,19 +207,8 @@ fn the_fused_completion_closes_the_orbited_bent_tube() {
     // Measured without the background rebuild; with it, the completion
     // costs the tube IoU (0.913 -> 0.833).
     let name = "orbit_bent_tube";
-    let no_rebuild = ["--set", "pipeline.rebuild=null"];
-    let (_, iou_off, ratio_off) =
-        closure(&replay_with(name, &["-q", no_rebuild[0], no_rebuild[1]]));
-    let out = replay_with(
-        name,
-        &[
-            "-q",
-            no_rebuild[0],
-            no_rebuild[1],
-            "--set",
-            "membrane.view.fused_completion={}",
-        ],
-    );
+    let (_, iou_off, ratio_off) = closure(&without_rebuild(name, &["-q"]));
+    let out = without_rebuild(name, &["-q", "--set", "membrane.view.fused_completion={}"]);
     let (_, iou, ratio) = closure(&out);
     assert!(
         iou >= iou_off - 0.02,
@@ -301,18 +291,8 @@ fn facing_away_keeps_the_unseen_side_from_collapsing_onto_the_seen_shell() {
     // the rule only past cold_max_cos, and with it the banana's smallest
     // volume ratio is 0.04 (-0.01 without the rule).
     let name = "turn_ycb_banana";
-    let no_rebuild = ["--set", "pipeline.rebuild=null"];
-    let off = replay_with(name, &["-q", no_rebuild[0], no_rebuild[1]]);
-    let on = replay_with(
-        name,
-        &[
-            "-q",
-            no_rebuild[0],
-            no_rebuild[1],
-            "--set",
-            "membrane.step.facing_away={}",
-        ],
-    );
+    let off = without_rebuild(name, &["-q"]);
+    let on = without_rebuild(name, &["-q", "--set", "membrane.step.facing_away={}"]);
     let (v_off, v_on) = (smallest_volume(&off), smallest_volume(&on));
     assert!(
         v_on >= 0.15 && v_on >= v_off + 0.1,
@@ -343,7 +323,7 @@ fn the_background_rebuild_restarts_the_warm_chain_from_a_cold_membrane_on_the_mo
     // more than 3σ outside 1.26 % -> 0.53 %; bent tube last-third IoU
     // 0.632 -> 0.783, points outside 3.3 % -> 1.7 %.
     for name in ["turn_rounded_box", "turn_bent_tube"] {
-        let off = replay_with(name, &["--set", "pipeline.rebuild=null"]);
+        let off = without_rebuild(name, &[]);
         let on = replay_with(name, &[]);
         assert!(!off.contains(" rebuilt("), "{name}: rebuilt with null");
         assert!(on.contains(" rebuilt(3)"), "{name}: no rebuilt frame");
