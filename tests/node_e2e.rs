@@ -69,15 +69,11 @@ async fn play_and_score(bag_file: &str, node_name: &str, min_f: f64) -> BTreeMap
             // frame started cold in the node, warm in the engine.
             "node.evict_after_ms=3600000".into(),
             // Lock step waits for every output: none may be dropped when the
-            // loaded machine's zenoh tx thread falls behind.
+            // loaded machine's zenoh tx thread falls behind. This includes the
+            // transient-local mesh and markers: while they stayed KEEP_LAST
+            // (zenoh's "drop"), a loaded 2-core machine lost one in about 1
+            // run in 5 and the lock step waited out every later frame.
             "node.outputs_keep_all=true".into(),
-            // Without the background rebuild's extra threads. With them (the
-            // node's and this test's engine's), about 1 run in 6 lost or
-            // delayed one MarkerArray for good on a 2-core machine, and the
-            // lock step then waited out every later frame; the same happens
-            // with no rebuild while two busy loops load both cores (1 run in
-            // 5): the node's outputs under CPU load, an open finding.
-            "pipeline.rebuild=null".into(),
             format!("node.transport.node_name=\"{node_name}\""),
         ],
     )
@@ -142,7 +138,13 @@ async fn play_and_score(bag_file: &str, node_name: &str, min_f: f64) -> BTreeMap
             }
             tokio::time::sleep(Duration::from_millis(25)).await;
         }
-        assert_eq!(got.len(), want, "{bag_file}: meshes of frame {stamp}");
+        assert_eq!(
+            got.len(),
+            want,
+            "{bag_file}: meshes of frame {stamp}; marker arrays {} after {} frames",
+            inbox_lock(&markers).len(),
+            k + 1
+        );
         let processed_len = processed.len();
         for p in processed {
             let r = p.outcome.unwrap();

@@ -180,17 +180,33 @@ impl NodeConfig {
     }
 
     /// The QoS of one output kind: [`NodeConfig::output_qos`], made
-    /// TRANSIENT_LOCAL with KEEP_LAST(depth) when `outputs.transient_local`
-    /// lists it (KEEP_LAST(1) for a kind whose message holds the whole frame).
+    /// TRANSIENT_LOCAL when `outputs.transient_local` lists it, with
+    /// KEEP_LAST of its cache depth ([`NodeConfig::output_cache_of`]), or
+    /// KEEP_ALL with `outputs_keep_all`: a transient-local output then
+    /// blocks like the others rather than dropping (its cache stays at the
+    /// configured depth). Before, KEEP_LAST won there, and under two busy
+    /// cores the lock-step test lost a mesh or a MarkerArray in 3 of 8 runs.
     pub fn output_qos_of(&self, kind: OutputKind) -> crate::transport::liveliness::Qos {
         use crate::transport::liveliness::{Durability, Qos};
-        match &self.outputs.transient_local {
-            Some(tl) if tl.outputs.contains(&kind) => Qos {
+        match self.output_cache_of(kind) {
+            Some(depth) => Qos {
                 durability: Durability::TransientLocal,
-                keep_last: Some(if kind.whole_frame() { 1 } else { tl.depth }),
+                keep_last: (!self.outputs_keep_all).then_some(depth),
                 ..self.output_qos()
             },
-            _ => self.output_qos(),
+            None => self.output_qos(),
+        }
+    }
+
+    /// How many samples a transient-local output's publisher keeps for late
+    /// joiners: `outputs.transient_local.depth`, or 1 for a kind whose
+    /// message holds the whole frame; `None` for a volatile output.
+    pub fn output_cache_of(&self, kind: OutputKind) -> Option<u32> {
+        match &self.outputs.transient_local {
+            Some(tl) if tl.outputs.contains(&kind) => {
+                Some(if kind.whole_frame() { 1 } else { tl.depth })
+            }
+            _ => None,
         }
     }
 
@@ -320,5 +336,33 @@ mod tests {
         let exact = vec!["/cam/points".to_string()];
         assert!(outputs.is_output("/cam/points/model", &exact));
         assert!(!outputs.is_output("/cam/other/model", &exact));
+    }
+
+    #[test]
+    fn keep_all_outputs_block_even_when_latched_and_keep_a_bounded_cache() {
+        use super::OutputKind;
+        use crate::transport::liveliness::Durability;
+        let mut cfg = crate::config::Config::defaults().unwrap().node;
+        let latched = cfg.outputs.transient_local.clone().unwrap();
+        assert!(latched.outputs.contains(&OutputKind::Mesh));
+        assert!(latched.outputs.contains(&OutputKind::Markers));
+        for keep_all in [false, true] {
+            cfg.outputs_keep_all = keep_all;
+            let mesh = cfg.output_qos_of(OutputKind::Mesh);
+            let markers = cfg.output_qos_of(OutputKind::Markers);
+            assert_eq!(mesh.durability, Durability::TransientLocal);
+            assert_eq!(markers.durability, Durability::TransientLocal);
+            // KEEP_ALL (no depth) is what maps to zenoh's "block".
+            let mesh_depth = (!keep_all).then_some(latched.depth);
+            assert_eq!(mesh.keep_last, mesh_depth, "keep_all {keep_all}");
+            assert_eq!(markers.keep_last, (!keep_all).then_some(1));
+            assert_eq!(cfg.output_qos().keep_last.is_none(), keep_all);
+            // The cache depth does not follow KEEP_ALL.
+            assert_eq!(cfg.output_cache_of(OutputKind::Mesh), Some(latched.depth));
+            assert_eq!(cfg.output_cache_of(OutputKind::Markers), Some(1));
+        }
+        cfg.outputs.transient_local = None;
+        assert_eq!(cfg.output_cache_of(OutputKind::Mesh), None);
+        assert_eq!(cfg.output_qos_of(OutputKind::Mesh), cfg.output_qos());
     }
 }

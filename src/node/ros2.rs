@@ -78,12 +78,26 @@ fn publish_outputs(pubs: &Publishers, topic: &str, outputs: &[Output]) {
     }
 }
 
-/// The publishers' QoS: [`NodeConfig::output_qos`] as an r2r profile.
+/// The diagnostics publisher's QoS: [`NodeConfig::output_qos`] as an r2r
+/// profile.
 fn output_qos(cfg: &NodeConfig) -> r2r::QosProfile {
     if cfg.output_qos().keep_last.is_none() {
         r2r::QosProfile::default().keep_all()
     } else {
         r2r::QosProfile::default()
+    }
+}
+
+/// One output kind's QoS ([`NodeConfig::output_qos_of`]) as an r2r
+/// profile. A transient-local output keeps KEEP_LAST of its cache depth
+/// even with `outputs_keep_all`: the rmw sizes its cache by the history,
+/// and a KEEP_ALL cache would grow without bound.
+fn output_qos_of(cfg: &NodeConfig, kind: OutputKind) -> r2r::QosProfile {
+    match cfg.output_cache_of(kind) {
+        Some(depth) => r2r::QosProfile::default()
+            .keep_last(usize::try_from(depth).unwrap_or(1))
+            .transient_local(),
+        None => output_qos(cfg),
     }
 }
 
@@ -252,7 +266,7 @@ pub fn run(
                     .create_publisher_untyped(
                         &out,
                         &backend.output_type(kind).name,
-                        output_qos(cfg),
+                        output_qos_of(cfg, kind),
                     )
                     .map_err(ros_err)?;
                 pubs.insert(kind, p);

@@ -40,9 +40,10 @@ use crate::transport::attachment::now_ns;
 use crate::transport::keys::expand_topic_template;
 use crate::transport::liveliness::{EntityKind, Qos};
 use crate::transport::session::EntityToken;
-use crate::transport::{Participant, Received, RosPublisher};
+use crate::transport::{Outlet, Participant, Received, RosPublisher};
 use std::collections::{BTreeMap, HashMap};
 use std::future::Future;
+use std::num::NonZeroUsize;
 use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
@@ -560,7 +561,12 @@ async fn declare_stream(ctx: &StreamCtx) -> (Option<EntityToken>, Publishers) {
         let ty = tr.advertised(&ctx.backend.output_type(kind));
         match ctx
             .participant
-            .publisher_in(&out, &ty, ctx.cfg.output_qos_of(kind), kind.lane())
+            .publisher_in(
+                &out,
+                &ty,
+                ctx.cfg.output_qos_of(kind),
+                outlet_of(&ctx.cfg, kind),
+            )
             .await
         {
             Ok(p) => {
@@ -570,6 +576,17 @@ async fn declare_stream(ctx: &StreamCtx) -> (Option<EntityToken>, Publishers) {
         }
     }
     (token, pubs)
+}
+
+/// The lane and cache depth of one output kind's publisher.
+fn outlet_of(cfg: &NodeConfig, kind: OutputKind) -> Outlet {
+    Outlet {
+        lane: kind.lane(),
+        cache: cfg
+            .output_cache_of(kind)
+            .and_then(|d| usize::try_from(d).ok())
+            .and_then(NonZeroUsize::new),
+    }
 }
 
 /// Hand the stream's newest frame and its processor to the compute pool,

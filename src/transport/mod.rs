@@ -20,7 +20,9 @@ pub use attachment::{Attachment, AttachmentError};
 pub use keys::{KeyError, KeyMapper, KeyMode, RosType};
 pub use liveliness::{EntityKind, LivelinessError, Qos, Token};
 #[cfg(feature = "zenoh")]
-pub use session::{free_loopback_port, EntityToken, Lane, Participant, Received, RosPublisher};
+pub use session::{
+    free_loopback_port, EntityToken, Lane, Outlet, Participant, Received, RosPublisher,
+};
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;

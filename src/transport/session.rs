@@ -20,6 +20,7 @@ use super::attachment::{gid_of_liveliness_key, now_ns, Attachment, AttachmentErr
 use super::keys::{KeyError, KeyMapper, KeyMode, RosType};
 use super::liveliness::{Durability, EntityKind, Qos, Reliability, Token, TopicToken};
 use super::{TransportConfig, TransportError};
+use std::num::NonZeroUsize;
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
 use std::sync::Arc;
 use zenoh::bytes::ZBytes;
@@ -64,6 +65,18 @@ impl Lane {
             Lane::Urgent => zenoh::qos::Priority::DataHigh,
         }
     }
+}
+
+/// How a publisher sends, beyond its ROS QoS.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Outlet {
+    /// The zenoh priority lane.
+    pub lane: Lane,
+    /// Samples a TRANSIENT_LOCAL publisher's cache keeps for late joiners.
+    /// `None`: the QoS's KEEP_LAST depth, or 100 for KEEP_ALL. A node's
+    /// KEEP_ALL output (it blocks rather than drops) keeps a configured
+    /// depth, so its memory stays bounded.
+    pub cache: Option<NonZeroUsize>,
 }
 
 /// Build the zenoh configuration described by `cfg`.
@@ -293,10 +306,11 @@ impl Participant {
         ty: &RosType,
         qos: Qos,
     ) -> Result<RosPublisher, TransportError> {
-        self.publisher_in(topic, ty, qos, Lane::Data).await
+        self.publisher_in(topic, ty, qos, Outlet::default()).await
     }
 
-    /// [`Participant::publisher`] in a chosen priority `lane`.
+    /// [`Participant::publisher`] with a chosen priority lane and cache
+    /// depth (`outlet`).
     ///
     /// # Errors
     /// [`TransportError`] for a bad topic/type or a zenoh failure.
@@ -305,7 +319,7 @@ impl Participant {
         topic: &str,
         ty: &RosType,
         qos: Qos,
-        lane: Lane,
+        outlet: Outlet,
     ) -> Result<RosPublisher, TransportError> {
         let key = self.mapper.publish_key(topic, ty)?;
         let token = self
@@ -323,11 +337,16 @@ impl Participant {
             .session
             .declare_publisher(key.clone())
             .congestion_control(congestion)
-            .priority(lane.priority());
+            .priority(outlet.lane.priority());
         let publisher = if qos.durability == Durability::TransientLocal {
-            let depth = qos.keep_last.map_or(KEEP_ALL_CACHE, |d| {
-                usize::try_from(d).unwrap_or(KEEP_ALL_CACHE)
-            });
+            let depth = outlet.cache.map_or_else(
+                || {
+                    qos.keep_last.map_or(KEEP_ALL_CACHE, |d| {
+                        usize::try_from(d).unwrap_or(KEEP_ALL_CACHE)
+                    })
+                },
+                NonZeroUsize::get,
+            );
             let mut b = builder
                 .cache(zenoh_ext::CacheConfig::default().max_samples(depth))
                 .publisher_detection();
