@@ -71,6 +71,30 @@ impl ViewFrame {
         let [a, b] = self.lateral(p);
         Some(([a / along, b / along], along))
     }
+
+    /// The gnomonic window `(lo, hi)` that holds every point of `points`;
+    /// `None` when one lies outside the cone whose cosine with the view
+    /// direction is `min_cos` (its depth is at most `min_cos` times its
+    /// range), or has a NaN coordinate. Each caller states how far off axis
+    /// a view it accepts may reach.
+    pub fn window(&self, points: &[Vec3], min_cos: f64) -> Option<([f64; 2], [f64; 2])> {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in points {
+            let along = self.depth(p);
+            let inside = along.partial_cmp(&(min_cos * self.range(p)));
+            // `None` for a NaN coordinate.
+            if inside != Some(std::cmp::Ordering::Greater) {
+                return None;
+            }
+            let [a0, a1] = self.lateral(p);
+            let a = [a0 / along, a1 / along];
+            for k in 0..2 {
+                lo[k] = lo[k].min(a[k]);
+                hi[k] = hi[k].max(a[k]);
+            }
+        }
+        Some((lo, hi))
+    }
 }
 
 /// A range stored in a bin: `f64` or `f32`.

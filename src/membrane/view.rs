@@ -127,24 +127,8 @@ impl ViewBuffer {
         }
         let centroid = points.iter().sum::<Vec3>() / points.len() as f64;
         let frame = ViewFrame::looking_at(eye, centroid)?;
-        let cos_min = 10f64.to_radians().sin();
-        let mut ranges = Vec::with_capacity(points.len());
-        let mut lo = [f64::INFINITY; 2];
-        let mut hi = [f64::NEG_INFINITY; 2];
-        for p in points {
-            let r = frame.range(p);
-            let along = frame.depth(p);
-            if r.is_nan() || r <= 0.0 || along < cos_min * r {
-                return None;
-            }
-            let [a0, a1] = frame.lateral(p);
-            let a = [a0 / along, a1 / along];
-            for k in 0..2 {
-                lo[k] = lo[k].min(a[k]);
-                hi[k] = hi[k].max(a[k]);
-            }
-            ranges.push(r);
-        }
+        let (lo, hi) = frame.window(points, 10f64.to_radians().sin())?;
+        let ranges: Vec<f64> = points.iter().map(|p| frame.range(p)).collect();
         let mut sorted = ranges.clone();
         let mid = sorted.len() / 2;
         let (_, median_r, _) = sorted.select_nth_unstable_by(mid, f64::total_cmp);

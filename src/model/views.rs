@@ -82,23 +82,8 @@ impl DepthView {
         }
         let centroid = points.iter().sum::<Vec3>() / points.len() as f64;
         let frame = ViewFrame::looking_at(eye, centroid)?;
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        let mut range_sum = 0.0;
-        for p in points {
-            let along = frame.depth(p);
-            // Also false for a NaN coordinate.
-            if along.is_nan() || along <= 0.2 * frame.range(p) {
-                return None;
-            }
-            let [a0, a1] = frame.lateral(p);
-            let a = [a0 / along, a1 / along];
-            for k in 0..2 {
-                lo[k] = lo[k].min(a[k]);
-                hi[k] = hi[k].max(a[k]);
-            }
-            range_sum += along;
-        }
-        let mean_range = range_sum / points.len() as f64;
+        let (lo, hi) = frame.window(points, 0.2)?;
+        let mean_range = points.iter().map(|p| frame.depth(p)).sum::<f64>() / points.len() as f64;
         let span = (hi[0] - lo[0]).max(hi[1] - lo[1]);
         let cell = (BIN_DELTA * delta / mean_range).max(span / (max_side - 3) as f64);
         let mut image = RangeImage::new(frame, lo, hi, cell);
