@@ -745,7 +745,11 @@ impl Tracker {
             motion: motion.unwrap_or_else(align::Rigid::identity),
             refitted: matches!(reason, PathReason::Refit { .. }),
         });
-        self.start_rebuild(final_path, membranes, cfg, frame);
+        let urgency = match deadline {
+            Some(_) => rebuild::Urgency::Idle,
+            None => rebuild::Urgency::Awaited,
+        };
+        self.start_rebuild(final_path, membranes, cfg, frame, urgency);
         // The published mesh without the centring's curvature bias; the
         // alignment above and the next warm start keep the surface's own.
         rec.unbias_mesh();
@@ -807,14 +811,15 @@ impl Tracker {
     }
 
     /// After the frame, start the next background rebuild when none is in
-    /// flight. A cold frame first drops the one in flight: its model
-    /// restarted, or a refit just rebuilt it.
+    /// flight, on the pool of its `urgency`. A cold frame first drops the
+    /// one in flight: its model restarted, or a refit just rebuilt it.
     fn start_rebuild(
         &mut self,
         path: StartPath,
         membranes: &Membranes,
         cfg: &PipelineConfig,
         frame: u64,
+        urgency: rebuild::Urgency,
     ) {
         if path == StartPath::Cold {
             self.rebuild = None;
@@ -825,7 +830,7 @@ impl Tracker {
         if self.rebuild.is_none() {
             let budget = Budget::iterations(cold_cap(membranes.cold.config(), cfg));
             let model = f.model.clone();
-            let pending = workers.start(model, cfg.max_points, budget, frame);
+            let pending = workers.start(model, cfg.max_points, budget, frame, urgency);
             self.rebuild = Some(pending);
         }
     }
