@@ -175,6 +175,26 @@ pub struct InitConfig {
     /// A warm start on fused views first encloses the points outside it
     /// ([`super::enclose`]); `None` turns it off.
     pub warm_enclose: Option<EncloseConfig>,
+    /// A cold start on a partial cloud (one seen from a known camera)
+    /// reaches back to the depth of a mirror prior ([`super::init`]);
+    /// `None`: to the deepest point.
+    pub unseen_back: Option<UnseenBackConfig>,
+}
+
+/// `membrane.init.unseen_back`: the depth, behind the seen front, of a
+/// partial cloud's initial surface, as a factor on the mirror depth (`{}`
+/// takes 1.0).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct UnseenBackConfig {
+    /// The factor (positive) on `max(V, min(2V, L))`.
+    pub extent: f64,
+}
+
+impl Default for UnseenBackConfig {
+    fn default() -> Self {
+        Self { extent: 1.0 }
+    }
 }
 
 /// `membrane.init.warm_enclose`: how far outside a warm surface a point
@@ -207,6 +227,7 @@ impl Default for InitConfig {
             margin: 1.05,
             grid: [8, 5],
             warm_enclose: Some(EncloseConfig::default()),
+            unseen_back: None,
         }
     }
 }
@@ -729,6 +750,11 @@ fn validate_init(i: &InitConfig) -> Result<(), ConfigError> {
         i.margin >= 1.0 && i.margin.is_finite(),
         "init.margin",
         "must be >= 1",
+    )?;
+    check(
+        i.unseen_back.as_ref().is_none_or(|b| pos(b.extent)),
+        "init.unseen_back.extent",
+        "must be a finite value > 0",
     )?;
     let enclose = i.warm_enclose.as_ref();
     let distances = [

@@ -92,6 +92,15 @@ impl Prepared<'_> {
         Seen::of(self.view.as_ref(), self.free)
     }
 
+    /// The camera of a partial cloud: the single view's, or the latest
+    /// view's of a fused one (`None`: seen from all around).
+    pub(crate) fn eye(&self) -> Option<Vec3> {
+        match &self.view {
+            Some(v) => Some(v.eye()),
+            None => self.free.and_then(|f| f.latest_eye()),
+        }
+    }
+
     /// Whether the cloud was taken as a single depth view (a fused cloud
     /// with its views' free space, `free`, is not: it is seen from
     /// several sides, but like a single view it is partial, and the pole
