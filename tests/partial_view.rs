@@ -124,8 +124,8 @@ fn the_unseen_back_prior_gives_a_sphere_seen_from_one_side_its_depth() {
     // membrane holds its initial surface where nothing was seen, so the back
     // stays at the deepest seen point unless `membrane.init.unseen_back`
     // takes it to the mirror depth. Measured at the time of writing (3
-    // frames): volume ratio 0.33-0.36 without, 0.90-0.91 with; depth ratio
-    // 0.49-0.51 without, 0.92-0.94 with; F 0.42-0.44 without, 0.56-0.59 with.
+    // frames): volume ratio 0.33-0.36 without, 0.89 with; depth ratio
+    // 0.49-0.51 without, 0.89-0.90 with; F 0.42-0.44 without, 0.58-0.60 with.
     let without = replay(&["sphere"], 3, &[]);
     let with = replay(&["sphere"], 3, &["membrane.init.unseen_back={}"]);
     for (a, b) in without.iter().zip(&with) {
