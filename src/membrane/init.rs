@@ -185,6 +185,7 @@ fn octagon_in(
         .map(|p| gauge(&to_q(p)))
         .fold(1.0f64, f64::max);
     let s = enclose * margin.max(1.0);
+    let back_pad = back.map(|b| (b, (margin - 1.0).max(0.0) * extent[b.axis]));
     let lay = fit.layout().clone();
     let mut targets = Vec::with_capacity(lay.len());
     for &v in &lay.vs {
@@ -197,8 +198,8 @@ fn octagon_in(
             p[ax[0]] += q.x * half.x;
             p[ax[1]] += q.y * half.y;
             p[ax[2]] += q.z * half.z;
-            if let Some(b) = back {
-                p = b.clamp(p, (margin - 1.0).max(0.0) * extent[b.axis]);
+            if let Some((b, pad)) = back_pad {
+                p = b.clamp(p, pad);
             }
             targets.push(p);
         }
@@ -218,7 +219,8 @@ fn octagon_in(
 pub(crate) fn initial(
     points: &[Vec3],
     cfg: &InitConfig,
-    (warm, eye): (Option<&WarmStart>, Option<Vec3>),
+    warm: Option<&WarmStart>,
+    eye: Option<Vec3>,
     pole: Option<usize>,
     fits: &mut Fits<'_>,
 ) -> Result<(ClosedSurface, usize), MembraneError> {
