@@ -6,7 +6,10 @@
 //! the same meshes and scores on any machine, at any load. `--realtime`
 //! applies the node's per-frame deadlines instead (`pipeline.deadline_ms`,
 //! `cold_deadline_ms`), to see what a loaded node would publish. The
-//! latency summary is measured either way.
+//! latency summary is measured either way. Without a deadline a frame
+//! waits for its stream's background rebuild (`pipeline.rebuild`), which
+//! the node's frames never do; the summary gives the warm frames' latency
+//! with and without those waits.
 //!
 //! When the bag carries ground truth (`sepmem_msgs/msg/GroundTruth`, as
 //! written by `sepmem synth`), every frame of every stream is scored against
@@ -276,6 +279,9 @@ pub fn run_opts(
     let (mut latencies, mut warm_it, mut cold_it) = (Vec::new(), Vec::new(), Vec::new());
     // The warm frames' latencies alone (the cost: warm frame p95).
     let mut warm_latencies = Vec::new();
+    // Warm frames' latency less their wait for a rebuild, and the waits.
+    let mut warm_own = Vec::new();
+    let mut waits = Vec::new();
     let (mut bad_samples, mut failed) = (0usize, 0usize);
     for m in &messages {
         bar.inc(1);
@@ -298,6 +304,10 @@ pub fn run_opts(
                         StartPath::Warm => {
                             warm_it.push(r.iterations as f64);
                             warm_latencies.push(r.latency_ms);
+                            warm_own.push(r.latency_ms - r.rebuild_wait_ms);
+                            if r.rebuild_wait_ms > 0.0 {
+                                waits.push(r.rebuild_wait_ms);
+                            }
                         }
                         StartPath::Cold => cold_it.push(r.iterations as f64),
                     }
@@ -444,8 +454,9 @@ pub fn run_opts(
     bar.finish_and_clear();
     latencies.sort_by(f64::total_cmp);
     warm_latencies.sort_by(f64::total_cmp);
+    warm_own.sort_by(f64::total_cmp);
     println!(
-        "summary: {} samples, {} frames ok ({} warm, {} cold), {} failed, {} bad samples; {}; warm frames: {}; mean iterations warm {} cold {}; {}",
+        "summary: {} samples, {} frames ok ({} warm, {} cold), {} failed, {} bad samples; {}; warm frames: {}; {}; mean iterations warm {} cold {}; {}",
         messages.len(),
         latencies.len(),
         warm_it.len(),
@@ -454,6 +465,7 @@ pub fn run_opts(
         bad_samples,
         latency_summary(&latencies),
         latency_summary(&warm_latencies),
+        rebuild_waits(&warm_own, &waits),
         one_decimal(mean(&warm_it)),
         one_decimal(mean(&cold_it)),
         if p.deadline_ms > 0.0 {
@@ -626,6 +638,20 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
         max(&all(|v| v.translation_mm)),
         views.iter().filter(|v| v.outside.outside > 0).count(),
         max(&all(|v| v.outside.worst_sigmas)),
+    )
+}
+
+/// The warm frames' latency less their waits for a rebuild (`own`,
+/// sorted), and how many waited how long in all (`waits`).
+fn rebuild_waits(own: &[f64], waits: &[f64]) -> String {
+    if waits.is_empty() {
+        return "no frame waited for a rebuild".to_string();
+    }
+    format!(
+        "{} took a rebuild, waiting {:.1} ms in all; without the waits: {}",
+        waits.len(),
+        waits.iter().sum::<f64>(),
+        latency_summary(own)
     )
 }
 

@@ -15,11 +15,13 @@
 //!    fused model's points (`model_icp`, [`align::align_to_points`]: the
 //!    model holds every view and does not drift with the warm chain);
 //!    when the aligned surface still explains
-//!    fewer than `icp_min_inliers` of the points, the frame starts cold: on
-//!    the fused model, which it keeps, when the model explains that share
-//!    under the same motion (a **refit**: the surface was lost, not the
-//!    track; once per surface), else from this frame alone (the track is
-//!    lost, and the model restarts);
+//!    fewer than `icp_min_inliers` of the points, the model explains that
+//!    share under the same motion (a **refit**: the surface was lost, not
+//!    the track) and the rebuild is on, the frame starts warm and the next
+//!    frame adopts a rebuild on this frame's model (`refit.path`
+//!    "background"); else it starts cold: on the fused model, which it
+//!    keeps, for a refit (once per surface), or from this frame alone (the
+//!    track is lost, and the model restarts);
 //! 4. evolves the membrane (paper §III-D/E steps 2–5) under the frame's
 //!    budget: an iteration cap (small for warm frames) and a wall-clock
 //!    deadline shared by all attempts of the frame;
@@ -163,6 +165,7 @@ impl Default for PipelineConfig {
             icp_min_inliers: Some(Share(0.75)),
             refit: Some(RefitConfig {
                 min_model_inliers: Share(0.75),
+                path: RefitPath::Background,
             }),
             model_icp: Some(ModelIcpConfig::default()),
             rebuild: Some(rebuild::RebuildConfig::default()),
@@ -179,14 +182,37 @@ impl Default for PipelineConfig {
 /// `pipeline.refit`: when the surface, not the track, was lost. A frame the
 /// aligned previous surface explains too poorly (`icp_min_inliers`) but
 /// whose points lie within `icp_trim` of the fused model's under the same
-/// motion, as a share of at least `min_model_inliers`, starts cold on the
-/// fused model, which keeps its views and pose; a refit surface that fails
-/// the next frame too loses the track.
+/// motion, as a share of at least `min_model_inliers`, gets a cold
+/// membrane on the fused model, which keeps its views and pose: in the
+/// frame or in the background ([`RefitPath`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RefitConfig {
     /// Least share of the frame's sampled points the model must explain.
     pub min_model_inliers: Share,
+    /// Where the refit's cold membrane runs.
+    pub path: RefitPath,
+}
+
+/// `pipeline.refit.path`: where a refit's cold membrane on the fused model
+/// runs. On the 39 sequences of `benches/robot_view_eval.sh`, `Cold` ->
+/// `Background`: cold frames after the first 18 -> 3, median last-third F
+/// unchanged (0.727; mean 0.705 -> 0.709); the orbited YCB banana 0.573 ->
+/// 0.722, whose refit in the frame failed the next frame and lost the
+/// track; the drifting bowl 0.582 -> 0.537, where the refit's own mesh was
+/// better at once.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RefitPath {
+    /// In the frame ([`StartPath::Cold`]): this frame's mesh is the refit,
+    /// at a cold start's cost (60-240 ms on one core), and a refit surface
+    /// the next frame's points do not fit either loses the track.
+    Cold,
+    /// Off the frame path, with `pipeline.rebuild`: the frame starts warm
+    /// on the fused model, and the rebuild in flight is replaced by one on
+    /// this frame's model that the next frame adopts. Without
+    /// `pipeline.rebuild`, as [`Self::Cold`].
+    Background,
 }
 
 /// `pipeline.model_icp`: registration of each frame against the fused
@@ -391,8 +417,12 @@ pub struct FrameResult {
     /// to the previous surface (warm frames) or to the fused model (a
     /// refit); `None` when the frame restarted the stream.
     pub motion: Option<align::Rigid>,
-    /// Wall-clock time of the frame in ms.
+    /// Wall-clock time of the frame in ms, `rebuild_wait_ms` included.
     pub latency_ms: f64,
+    /// Of `latency_ms`, the time the frame waited for its stream's
+    /// background rebuild (only a frame without a deadline waits:
+    /// `sepmem replay`, for determinism; the live node never does).
+    pub rebuild_wait_ms: f64,
     /// The object's fused model after this frame, in this frame's cloud
     /// frame (one point per voxel; `None` when `pipeline.model` is null).
     pub model: Option<Vec<Vec3>>,
@@ -614,10 +644,15 @@ impl Tracker {
         let centroid = cloud.centroid().unwrap_or_else(Vec3::zeros);
         let size = cloud.aabb().longest_edge();
 
-        let (path, mut reason, mut warm, motion) = self.choose_path(cloud, centroid, size, cfg);
+        let background = membranes.rebuild.is_some();
+        let (path, mut reason, mut warm, motion) =
+            self.choose_path(cloud, centroid, size, cfg, background);
         let fused = self.fuse(raw, path, motion, size, cfg);
+        let mut rebuild_wait = Duration::ZERO;
         if let Some(w) = warm.as_mut() {
-            if let Some(age) = self.adopt_rebuild(w, frame, deadline.is_none()) {
+            let (adopted, waited) = self.adopt_rebuild(w, frame, deadline.is_none());
+            rebuild_wait = waited;
+            if let Some(age) = adopted {
                 reason = PathReason::Rebuilt { age };
             }
         } else {
@@ -743,13 +778,13 @@ impl Tracker {
             eta: rec.report.eta_final,
             eta_ref,
             motion: motion.unwrap_or_else(align::Rigid::identity),
-            refitted: matches!(reason, PathReason::Refit { .. }),
+            refitted: final_path == StartPath::Cold && matches!(reason, PathReason::Refit { .. }),
         });
         let urgency = match deadline {
             Some(_) => rebuild::Urgency::Idle,
             None => rebuild::Urgency::Awaited,
         };
-        self.start_rebuild(final_path, membranes, cfg, frame, urgency);
+        self.start_rebuild(final_path, reason, membranes, cfg, frame, urgency);
         // The published mesh without the centring's curvature bias; the
         // alignment above and the next warm start keep the surface's own.
         rec.unbias_mesh();
@@ -762,6 +797,7 @@ impl Tracker {
             reconstruction: rec,
             motion,
             latency_ms: start.elapsed().as_secs_f64() * 1e3,
+            rebuild_wait_ms: rebuild_wait.as_secs_f64() * 1e3,
             model: self.fused.as_ref().map(|f| f.model.points_in(&f.pose)),
             model_bytes: self.fused.as_ref().map(|f| f.model.bytes()),
         })
@@ -796,32 +832,49 @@ impl Tracker {
     /// Start the warm frame `warm` from the stream's background rebuild
     /// (`pipeline.rebuild`) when one may be adopted at `frame` (waiting
     /// for it when `wait`), moved into this frame by the tracked pose, and
-    /// return how many frames ago it started.
-    fn adopt_rebuild(&mut self, warm: &mut WarmStart, frame: u64, wait: bool) -> Option<u64> {
-        let (pending, fused) = (self.rebuild.as_ref()?, self.fused.as_ref()?);
-        let surface = match pending.adopt(frame, wait) {
-            rebuild::Adopt::NotYet => return None,
+    /// return how many frames ago it started, and how long the frame waited.
+    fn adopt_rebuild(
+        &mut self,
+        warm: &mut WarmStart,
+        frame: u64,
+        wait: bool,
+    ) -> (Option<u64>, Duration) {
+        let (Some(pending), Some(fused)) = (self.rebuild.as_ref(), self.fused.as_ref()) else {
+            return (None, Duration::ZERO);
+        };
+        let waiting = (wait && pending.is_due(frame)).then(Instant::now);
+        let adopted = pending.adopt(frame, wait);
+        let waited = waiting.map_or(Duration::ZERO, |t| t.elapsed());
+        let surface = match adopted {
+            rebuild::Adopt::NotYet => return (None, waited),
             rebuild::Adopt::Failed => None,
             rebuild::Adopt::Surface(s) => s.rigidly_moved(&fused.pose).ok(),
         };
         let age = frame.saturating_sub(pending.started());
         self.rebuild = None;
-        warm.surface = surface?;
-        Some(age)
+        let Some(surface) = surface else {
+            return (None, waited);
+        };
+        warm.surface = surface;
+        (Some(age), waited)
     }
 
     /// After the frame, start the next background rebuild when none is in
     /// flight, on the pool of its `urgency`. A cold frame first drops the
-    /// one in flight: its model restarted, or a refit just rebuilt it.
+    /// one in flight: its model restarted, or a refit just rebuilt it. A
+    /// warm refit ([`RefitPath::Background`]) replaces it by one on this
+    /// frame's model, which the next frame adopts.
     fn start_rebuild(
         &mut self,
         path: StartPath,
+        reason: PathReason,
         membranes: &Membranes,
         cfg: &PipelineConfig,
         frame: u64,
         urgency: rebuild::Urgency,
     ) {
-        if path == StartPath::Cold {
+        let refit = path == StartPath::Warm && matches!(reason, PathReason::Refit { .. });
+        if path == StartPath::Cold || refit {
             self.rebuild = None;
         }
         let (Some(workers), Some(f)) = (&membranes.rebuild, &self.fused) else {
@@ -829,8 +882,9 @@ impl Tracker {
         };
         if self.rebuild.is_none() {
             let budget = Budget::iterations(cold_cap(membranes.cold.config(), cfg));
+            let lag = if refit { 1 } else { workers.lag() };
             let model = f.model.clone();
-            let pending = workers.start(model, cfg.max_points, budget, frame, urgency);
+            let pending = workers.start(model, cfg.max_points, budget, frame, lag, urgency);
             self.rebuild = Some(pending);
         }
     }
@@ -852,6 +906,7 @@ impl Tracker {
         centroid: Vec3,
         size: f64,
         cfg: &PipelineConfig,
+        rebuilds: bool,
     ) -> Choice {
         let cold = |reason| (StartPath::Cold, reason, None, None);
         if !cfg.warm_start {
@@ -886,16 +941,26 @@ impl Tracker {
             (Some(index), Some(mi)) => on_model(index, cloud, motion, mi, scale),
             _ => motion,
         };
-        if lost {
+        let reason = if lost {
             let fused = fused
                 .as_ref()
                 .filter(|_| alignment.is_some() && !prev.refitted);
-            return refit_or_lost(fused, cloud, motion, inliers, scale, cfg);
-        }
+            let choice = refit_or_lost(fused, cloud, motion, inliers, scale, cfg);
+            let background = cfg
+                .refit
+                .as_ref()
+                .is_some_and(|r| rebuilds && r.path == RefitPath::Background);
+            match choice.1 {
+                PathReason::Refit { .. } if background => choice.1,
+                _ => return choice,
+            }
+        } else {
+            PathReason::Tracked
+        };
         match prev.surface.rigidly_moved(&motion) {
             Ok(surface) => (
                 StartPath::Warm,
-                PathReason::Tracked,
+                reason,
                 Some(WarmStart {
                     surface,
                     phase: self.stats.frames as usize,

@@ -108,10 +108,16 @@ impl Workers {
         })
     }
 
+    /// `lag_frames`: frames from a rebuild's start to the first frame that
+    /// may adopt it.
+    pub fn lag(&self) -> u64 {
+        self.lag
+    }
+
     /// Start a cold membrane on `model`'s points in the
     /// object's frame, thinned to `max_points`, under `budget` (no deadline:
     /// it runs off the frame path), as the stream's frame `frame`, on the
-    /// pool of its `urgency`; the warm
+    /// pool of its `urgency`, for adoption `lag` frames later; the warm
     /// fit of its grid is then factored, so the frame that adopts it does
     /// not pay for that.
     pub fn start(
@@ -120,6 +126,7 @@ impl Workers {
         max_points: usize,
         budget: Budget,
         frame: u64,
+        lag: u64,
         urgency: Urgency,
     ) -> Pending {
         let (tx, rx) = crossbeam_channel::bounded(1);
@@ -141,7 +148,7 @@ impl Workers {
             rx,
             _alive: alive,
             started: frame,
-            ready_at: frame.saturating_add(self.lag),
+            ready_at: frame.saturating_add(lag),
         }
     }
 }
@@ -236,11 +243,16 @@ impl Pending {
         self.started
     }
 
+    /// Whether `lag_frames` have passed by the stream's frame `frame`.
+    pub fn is_due(&self, frame: u64) -> bool {
+        frame >= self.ready_at
+    }
+
     /// The rebuild's surface for the stream's frame `frame`, once
     /// `lag_frames` have passed: waiting for it when `wait` (a frame
     /// without a deadline), else only when it is done.
     pub fn adopt(&self, frame: u64, wait: bool) -> Adopt {
-        if frame < self.ready_at {
+        if !self.is_due(frame) {
             return Adopt::NotYet;
         }
         let got = if wait {
@@ -297,6 +309,7 @@ mod tests {
             2500,
             Budget::iterations(40),
             10,
+            workers.lag(),
             Urgency::Awaited,
         );
         // Lag 3 (the default): frames 11 and 12 may not adopt it, even waiting.
@@ -327,6 +340,7 @@ mod tests {
             2500,
             Budget::iterations(40),
             0,
+            workers.lag(),
             Urgency::Idle,
         );
         let dropped = workers.start(
@@ -334,6 +348,7 @@ mod tests {
             2500,
             Budget::iterations(40),
             0,
+            workers.lag(),
             Urgency::Idle,
         );
         let rx = dropped.rx.clone();

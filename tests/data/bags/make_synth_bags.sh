@@ -30,4 +30,5 @@ for shape in capsule rounded_box bent_tube; do
 done
 "$SEPMEM" synth -o "$R/turn_ycb_banana.mcap" --shapes "$YCB/YcbBanana.obj" --motion turn $CAM --seed 4 --quiet
 "$SEPMEM" synth -o "$R/orbit_bent_tube.mcap" --shapes bent_tube --motion orbit $CAM --mesh-res 32 --seed 7 --quiet
+"$SEPMEM" synth -o "$R/orbit_ycb_banana.mcap" --shapes "$YCB/YcbBanana.obj" --motion orbit $CAM --seed 8 --quiet
 "$SEPMEM" synth -o "$R/swap.mcap" --shapes rounded_box,bottle,mug --motion swap $CAM --mesh-res 48 --seed 4 --quiet
