@@ -41,6 +41,11 @@
 mod common;
 
 use common::{figure, sepmem_stdout as sepmem};
+use sepmem::bag::Bag;
+use sepmem::config::Config;
+use sepmem::pipeline::engine::decode_sample;
+use sepmem::pipeline::{Deadlines, Membranes, PathReason, StreamKey, Tracker};
+use std::time::Instant;
 
 /// `sepmem replay -q` of the committed bag `name`, with the defaults.
 fn replay(name: &str) -> String {
@@ -408,4 +413,41 @@ fn a_refit_in_the_background_keeps_the_orbited_banana_warm_and_its_model() {
         iou1 >= iou0 + 0.2,
         "{name}: last-third IoU {iou1} in the background, {iou0} in the frame"
     );
+}
+
+#[test]
+fn a_refit_keeps_its_rebuild_when_frames_do_not_wait_for_it() {
+    // With a deadline (the live node) a frame adopts the stream's rebuild
+    // only once it is done. Replacing the rebuild in flight at every refit
+    // frame starved the refits: `sepmem replay --realtime` of the orbited
+    // YCB banana refitted 18 frames in a row from frame 12 and adopted
+    // none. Here each frame has a deadline (a minute away: its iterations
+    // are not cut, and it never waits for the rebuild), and a refit that
+    // follows a refit keeps the rebuild in flight. A rebuild, a cold
+    // membrane of tens of iterations, takes longer than a warm frame of
+    // four, so refits follow one another at the banana's end-on views.
+    let name = "orbit_ycb_banana";
+    let path = common::data_dir().join(format!("bags/robot_view/{name}.mcap"));
+    let bag = Bag::open(&path).unwrap();
+    let cfg = Config::load(None, &[]).unwrap();
+    let membranes = Membranes::new(&cfg.membrane, &cfg.pipeline).unwrap();
+    let topic = "/synth/YcbBanana/points";
+    let mut tracker = Tracker::new(StreamKey::topic(topic));
+    let (mut last, mut kept) = (None, 0);
+    for m in bag.read(&[topic]).unwrap() {
+        let mut sample = decode_sample(topic, &m.data, &cfg.wire, &cfg.pipeline).unwrap();
+        let cloud = sample.streams.remove(0).cloud;
+        let deadlines = Deadlines::after(Instant::now(), 60_000.0, 60_000.0);
+        let r = tracker
+            .process_by(&cloud, &membranes, &cfg.pipeline, deadlines)
+            .unwrap();
+        let refit = matches!(r.reason, PathReason::Refit { .. });
+        let started = tracker.rebuild_started();
+        if let (true, Some(before)) = (refit, last) {
+            assert_eq!(started, Some(before), "frame {}: rebuild replaced", r.frame);
+            kept += 1;
+        }
+        last = started.filter(|_| refit);
+    }
+    assert!(kept >= 1, "no refit followed a refit");
 }

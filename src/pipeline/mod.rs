@@ -210,7 +210,8 @@ pub enum RefitPath {
     Cold,
     /// Off the frame path, with `pipeline.rebuild`: the frame starts warm
     /// on the fused model, and the rebuild in flight is replaced by one on
-    /// this frame's model that the next frame adopts. Without
+    /// this frame's model that the next frame adopts (a refit that follows
+    /// a refit keeps it). Without
     /// `pipeline.rebuild`, as [`Self::Cold`].
     Background,
 }
@@ -561,6 +562,12 @@ impl Tracker {
         (moved <= max_motion && resized <= max_size_change).then_some(moved)
     }
 
+    /// The stream's frame after which its background rebuild in flight
+    /// (`pipeline.rebuild`) started; `None` when there is none.
+    pub fn rebuild_started(&self) -> Option<u64> {
+        self.rebuild.as_ref().map(rebuild::Pending::started)
+    }
+
     /// Follow another stream key (a re-identified label), history kept.
     pub fn rekey(&mut self, key: StreamKey) {
         self.key = key;
@@ -863,7 +870,11 @@ impl Tracker {
     /// flight, on the pool of its `urgency`. A cold frame first drops the
     /// one in flight: its model restarted, or a refit just rebuilt it. A
     /// warm refit ([`RefitPath::Background`]) replaces it by one on this
-    /// frame's model, which the next frame adopts.
+    /// frame's model that the next frame adopts, unless it is such a one
+    /// already: with a deadline a frame adopts a rebuild only once it is
+    /// done, and replacing it at every refit starved the live node's refits
+    /// (`sepmem replay --realtime` of the orbited YCB banana: 18 refits in a
+    /// row from frame 12, none adopted).
     fn start_rebuild(
         &mut self,
         path: StartPath,
@@ -874,7 +885,8 @@ impl Tracker {
         urgency: rebuild::Urgency,
     ) {
         let refit = path == StartPath::Warm && matches!(reason, PathReason::Refit { .. });
-        if path == StartPath::Cold || refit {
+        let for_refit = self.rebuild.as_ref().is_some_and(|p| p.is_hastened());
+        if path == StartPath::Cold || (refit && !for_refit) {
             self.rebuild = None;
         }
         let (Some(workers), Some(f)) = (&membranes.rebuild, &self.fused) else {
@@ -882,10 +894,12 @@ impl Tracker {
         };
         if self.rebuild.is_none() {
             let budget = Budget::iterations(cold_cap(membranes.cold.config(), cfg));
-            let lag = if refit { 1 } else { workers.lag() };
             let model = f.model.clone();
-            let pending = workers.start(model, cfg.max_points, budget, frame, lag, urgency);
+            let pending = workers.start(model, cfg.max_points, budget, frame, urgency);
             self.rebuild = Some(pending);
+        }
+        if let (Some(pending), true) = (self.rebuild.as_mut(), refit) {
+            pending.hasten(frame.saturating_add(1));
         }
     }
 

@@ -27,7 +27,9 @@
 //! frames waiting behind the other processes.
 //!
 //! A stream keeps at most one rebuild; a cold frame (which restarts or
-//! refits the model) or the stream's end cancels it, and a cancelled
+//! refits the model), a refit in the background (`pipeline.refit.path`,
+//! which starts one on its frame's model, due the next frame:
+//! [`Pending::hasten`]) or the stream's end cancels it, and a cancelled
 //! rebuild that has not started never runs, so the workers' queue holds at
 //! most one rebuild per live stream.
 
@@ -108,16 +110,10 @@ impl Workers {
         })
     }
 
-    /// `lag_frames`: frames from a rebuild's start to the first frame that
-    /// may adopt it.
-    pub fn lag(&self) -> u64 {
-        self.lag
-    }
-
     /// Start a cold membrane on `model`'s points in the
     /// object's frame, thinned to `max_points`, under `budget` (no deadline:
     /// it runs off the frame path), as the stream's frame `frame`, on the
-    /// pool of its `urgency`, for adoption `lag` frames later; the warm
+    /// pool of its `urgency`, for adoption `lag_frames` later; the warm
     /// fit of its grid is then factored, so the frame that adopts it does
     /// not pay for that.
     pub fn start(
@@ -126,7 +122,6 @@ impl Workers {
         max_points: usize,
         budget: Budget,
         frame: u64,
-        lag: u64,
         urgency: Urgency,
     ) -> Pending {
         let (tx, rx) = crossbeam_channel::bounded(1);
@@ -148,7 +143,8 @@ impl Workers {
             rx,
             _alive: alive,
             started: frame,
-            ready_at: frame.saturating_add(lag),
+            ready_at: frame.saturating_add(self.lag),
+            hastened: false,
         }
     }
 }
@@ -224,6 +220,8 @@ pub struct Pending {
     _alive: Arc<()>,
     started: u64,
     ready_at: u64,
+    /// [`Pending::hasten`] made it due sooner.
+    hastened: bool,
 }
 
 /// What a frame gets from a stream's rebuild.
@@ -241,6 +239,17 @@ impl Pending {
     /// The stream's frame it started after.
     pub fn started(&self) -> u64 {
         self.started
+    }
+
+    /// Make it due by the stream's frame `frame` at the latest.
+    pub fn hasten(&mut self, frame: u64) {
+        self.ready_at = self.ready_at.min(frame);
+        self.hastened = true;
+    }
+
+    /// Whether [`Self::hasten`] made it due sooner.
+    pub fn is_hastened(&self) -> bool {
+        self.hastened
     }
 
     /// Whether `lag_frames` have passed by the stream's frame `frame`.
@@ -309,7 +318,6 @@ mod tests {
             2500,
             Budget::iterations(40),
             10,
-            workers.lag(),
             Urgency::Awaited,
         );
         // Lag 3 (the default): frames 11 and 12 may not adopt it, even waiting.
@@ -330,6 +338,26 @@ mod tests {
     }
 
     #[test]
+    fn a_hastened_rebuild_is_due_by_the_frame_it_names() {
+        let membranes = membranes();
+        let workers = membranes.rebuild.as_ref().unwrap();
+        let mut pending = workers.start(
+            sphere_model(),
+            2500,
+            Budget::iterations(40),
+            10,
+            Urgency::Awaited,
+        );
+        assert!(!pending.is_hastened() && !pending.is_due(11));
+        pending.hasten(11);
+        assert!(pending.is_hastened() && pending.is_due(11));
+        // Never later than it was.
+        pending.hasten(20);
+        assert!(pending.is_due(11));
+        assert!(matches!(pending.adopt(11, true), Adopt::Surface(_)));
+    }
+
+    #[test]
     fn a_dropped_rebuild_that_has_not_started_never_runs() {
         let membranes = membranes();
         let workers = membranes.rebuild.as_ref().unwrap();
@@ -340,7 +368,6 @@ mod tests {
             2500,
             Budget::iterations(40),
             0,
-            workers.lag(),
             Urgency::Idle,
         );
         let dropped = workers.start(
@@ -348,7 +375,6 @@ mod tests {
             2500,
             Budget::iterations(40),
             0,
-            workers.lag(),
             Urgency::Idle,
         );
         let rx = dropped.rx.clone();
