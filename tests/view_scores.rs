@@ -130,7 +130,10 @@ fn column(header: &str, name: &str) -> usize {
 fn replay_prints_every_view_score_per_frame_and_per_third() {
     let out = common::sepmem_stdout(&[std::ffi::OsStr::new("replay"), mug_bag().as_os_str()]);
     let header = out.lines().find(|l| l.starts_with("stream")).unwrap();
-    let cols = ["F", "seen", "IoU", "rot", "tr_mm", "cover", "out3s"].map(|c| column(header, c));
+    let cols = [
+        "F", "seen", "IoU", "rot", "tr_mm", "cover", "out3s", "excess",
+    ]
+    .map(|c| column(header, c));
     let rows: Vec<Vec<f64>> = out
         .lines()
         .filter(|l| l.starts_with(STREAM))
@@ -143,7 +146,9 @@ fn replay_prints_every_view_score_per_frame_and_per_third() {
     let mut cover = 0.0;
     for (k, r) in rows.iter().enumerate() {
         assert!(r.iter().all(|x| x.is_finite()), "{k}: {r:?}");
-        for &share in &[r[0], r[1], r[2], r[5], r[6]] {
+        // (The silhouette excess, a share of the silhouette's pixels, could
+        // pass 1 for a mesh far larger than the object; the mug's does not.)
+        for &share in &[r[0], r[1], r[2], r[5], r[6], r[7]] {
             assert!((0.0..=1.0).contains(&share), "{k}: {r:?}");
         }
         assert!((0.0..=180.0).contains(&r[3]) && r[4] >= 0.0, "{k}: {r:?}");
@@ -162,6 +167,7 @@ fn replay_prints_every_view_score_per_frame_and_per_third() {
         "seen side median ",
         "pose error max rot ",
         "points outside by > 3 sigma ",
+        "silhouette excess median ",
     ] {
         assert!(summary.contains(part), "{summary}");
     }

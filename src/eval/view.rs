@@ -24,6 +24,12 @@
 //!   bag's noise model), and the largest such distance in σ
 //!   ([`crate::synth::view_metrics::points_outside`]): the issue's "no
 //!   visible point lies outside the mesh by more than 3σ";
+//! - **silhouette excess**: the mesh's projection beyond the true
+//!   object's silhouette in this frame's view, as a share of the
+//!   silhouette's pixels (one pixel of slack;
+//!   [`crate::synth::view_metrics::silhouette_excess_of`]): the issue's "the
+//!   mesh's projection stays inside the object's silhouette in every view",
+//!   measured in the current one; phantom lobes and fins count here;
 //! - **coverage**: the share of the true surface (object frame,
 //!   [`COVERAGE_SAMPLES`] area-uniform samples) seen so far by the camera,
 //!   with the simulator's incidence cut-off [`COVERAGE_MAX_INCIDENCE_DEG`]
@@ -38,8 +44,8 @@ use crate::pipeline::align::Rigid;
 use crate::synth::raycast::RaycastError;
 use crate::synth::truth::{TruthFrame, TruthTrack};
 use crate::synth::view_metrics::{
-    points_outside_of, pose_error, seen_side_accuracy_of, volume_iou_of, CastMesh, Coverage,
-    PointsOutside,
+    points_outside_of, pose_error, seen_side_accuracy_of, silhouette_excess_of, volume_iou_of,
+    CastMesh, Coverage, PointsOutside,
 };
 use crate::synth::Noise;
 
@@ -71,6 +77,9 @@ pub struct ViewScore {
     pub coverage: f64,
     /// The frame's points on the true surface that the mesh leaves out.
     pub outside: PointsOutside,
+    /// The mesh's projection beyond the true silhouette, as a share of the
+    /// silhouette (`None` when the camera does not see the object).
+    pub silhouette_excess: Option<f64>,
 }
 
 /// What [`ViewTracker::score`] needs of one frame.
@@ -110,6 +119,7 @@ impl ViewTracker {
         // Both hierarchies built once for the three mesh metrics.
         let (truth, mesh) = (CastMesh::new(f.posed_truth)?, CastMesh::new(f.mesh)?);
         let seen = seen_side_accuracy_of(&f.truth.camera, &truth, &mesh, tau);
+        let excess = silhouette_excess_of(&f.truth.camera, &truth, &mesh);
         let iou = volume_iou_of(&mesh, &truth, IOU_CELLS)?;
         let noise = Noise::kinect();
         let sigma = |z| noise.sigma(z);
@@ -128,6 +138,7 @@ impl ViewTracker {
             translation_mm: err.translation_m * 1e3,
             coverage,
             outside,
+            silhouette_excess: excess.share(),
         })
     }
 

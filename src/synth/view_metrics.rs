@@ -125,6 +125,74 @@ pub fn seen_side_accuracy_of(
     }
 }
 
+/// Result of [`silhouette_excess_of`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SilhouetteExcess {
+    /// Pixel rays that hit the true object within the depth range.
+    pub silhouette: usize,
+    /// Pixel rays that hit the reconstruction while neither they nor any of
+    /// their 8 neighbours hit the true object.
+    pub excess: usize,
+}
+
+impl SilhouetteExcess {
+    /// `excess / silhouette`, `None` when the camera does not see the object.
+    pub fn share(&self) -> Option<f64> {
+        (self.silhouette > 0).then(|| self.excess as f64 / self.silhouette as f64)
+    }
+}
+
+/// The reconstruction's projection beyond the true object's silhouette in
+/// `camera`'s view (the robot's-view issue: "the mesh's projection stays
+/// inside the object's silhouette in every view"): the pixel rays that hit
+/// `recon` within the camera's depth range while neither they nor their 8
+/// neighbours hit `truth` (one pixel of slack for the silhouette's own
+/// sampling), against the rays that hit `truth`. Both meshes are in the
+/// camera's optical frame.
+pub fn silhouette_excess_of(
+    camera: &Camera,
+    truth: &CastMesh<'_>,
+    recon: &CastMesh<'_>,
+) -> SilhouetteExcess {
+    let none = SilhouetteExcess {
+        silhouette: 0,
+        excess: 0,
+    };
+    let mut bounds = truth.mesh.aabb();
+    let r = recon.mesh.aabb();
+    bounds.min = bounds.min.inf(&r.min);
+    bounds.max = bounds.max.sup(&r.max);
+    let Some((i0, i1, j0, j1)) = pixel_rect(camera, &Isometry3::identity(), &bounds) else {
+        return none;
+    };
+    let origin = Vec3::zeros();
+    let hits = |mesh: &CastMesh<'_>, i: usize, j: usize| {
+        let d = camera.pixel_ray(i, j);
+        mesh.caster
+            .first_hit(&origin, &d, camera.max_depth)
+            .is_some_and(|h| h.t >= camera.min_depth)
+    };
+    let width = i1 - i0 + 1;
+    let on_truth: Vec<Vec<bool>> = (j0..=j1)
+        .into_par_iter()
+        .map(|j| (i0..=i1).map(|i| hits(truth, i, j)).collect())
+        .collect();
+    let near_truth = |i: usize, j: usize| {
+        (j.saturating_sub(1)..=(j + 1).min(on_truth.len() - 1))
+            .any(|b| (i.saturating_sub(1)..=(i + 1).min(width - 1)).any(|a| on_truth[b][a]))
+    };
+    let excess = (0..on_truth.len())
+        .into_par_iter()
+        .map(|b| {
+            (0..width)
+                .filter(|&a| !near_truth(a, b) && hits(recon, i0 + a, j0 + b))
+                .count()
+        })
+        .sum();
+    let silhouette = on_truth.iter().flatten().filter(|&&h| h).count();
+    SilhouetteExcess { silhouette, excess }
+}
+
 /// Result of [`points_outside`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PointsOutside {
@@ -475,6 +543,34 @@ mod tests {
                 .within,
             0
         );
+    }
+
+    #[test]
+    fn silhouette_excess_counts_the_mesh_seen_beyond_the_true_outline() {
+        let cam = Camera::kinect();
+        let c = Vec3::new(0.0, 0.0, 1.0);
+        let truth = sphere(0.1, c);
+        let cast = |m: &TriMesh| {
+            let (t, r) = (CastMesh::new(&truth).unwrap(), CastMesh::new(m).unwrap());
+            silhouette_excess_of(&cam, &t, &r)
+        };
+        let exact = cast(&truth);
+        assert_eq!(exact.excess, 0, "{exact:?}");
+        // The disc of pixels seen: π (f r / √(d² − r²))².
+        let disc = PI * (525.0 * 0.1 / (1.0f64 - 0.01).sqrt()).powi(2);
+        assert!((exact.silhouette as f64 - disc).abs() < 0.02 * disc);
+        // Smaller, or behind the object within its outline: nothing beyond.
+        assert_eq!(cast(&sphere(0.09, c)).excess, 0);
+        assert_eq!(cast(&sphere(0.05, c + Vec3::new(0.0, 0.0, 0.2))).excess, 0);
+        // 20 % larger: the ring between the outlines, less one pixel, about
+        // 1.2² − 1 of the disc.
+        let big = cast(&sphere(0.12, c)).share().unwrap();
+        assert!((0.38..0.46).contains(&big), "{big}");
+        // A lobe beside the object: all of its disc.
+        let lobe = sphere(0.03, c + Vec3::new(0.2, 0.0, 0.0));
+        let share = cast(&lobe).share().unwrap();
+        let want = (0.03f64 / 0.1).powi(2);
+        assert!((share - want).abs() < 0.02, "{share} vs {want}");
     }
 
     #[test]
