@@ -211,8 +211,7 @@ pub enum RefitPath {
     /// Off the frame path, with `pipeline.rebuild`: the frame starts warm
     /// on the fused model, and the rebuild in flight is replaced by one on
     /// this frame's model that the next frame adopts (a refit that follows
-    /// a refit keeps it). Without
-    /// `pipeline.rebuild`, as [`Self::Cold`].
+    /// a refit keeps it). Without `pipeline.rebuild`, as [`Self::Cold`].
     Background,
 }
 
@@ -651,9 +650,9 @@ impl Tracker {
         let centroid = cloud.centroid().unwrap_or_else(Vec3::zeros);
         let size = cloud.aabb().longest_edge();
 
-        let background = membranes.rebuild.is_some();
+        let rebuilds = membranes.rebuild.is_some();
         let (path, mut reason, mut warm, motion) =
-            self.choose_path(cloud, centroid, size, cfg, background);
+            self.choose_path(cloud, centroid, size, cfg, rebuilds);
         let fused = self.fuse(raw, path, motion, size, cfg);
         let mut rebuild_wait = Duration::ZERO;
         if let Some(w) = warm.as_mut() {
