@@ -44,8 +44,7 @@ use crate::pipeline::align::Rigid;
 use crate::synth::raycast::RaycastError;
 use crate::synth::truth::{TruthFrame, TruthTrack};
 use crate::synth::view_metrics::{
-    points_outside_of, pose_error, seen_side_accuracy_of, silhouette_excess_of, volume_iou_of,
-    CastMesh, Coverage, PointsOutside,
+    points_outside_of, pose_error, volume_iou_of, CastMesh, Coverage, PointsOutside, TruthRays,
 };
 use crate::synth::Noise;
 
@@ -118,8 +117,10 @@ impl ViewTracker {
         let tau = f.tau_fraction * f.posed_truth.aabb().longest_edge();
         // Both hierarchies built once for the three mesh metrics.
         let (truth, mesh) = (CastMesh::new(f.posed_truth)?, CastMesh::new(f.mesh)?);
-        let seen = seen_side_accuracy_of(&f.truth.camera, &truth, &mesh, tau);
-        let excess = silhouette_excess_of(&f.truth.camera, &truth, &mesh);
+        // The true object's pixel rays cast once for both image metrics.
+        let rays = TruthRays::new(&f.truth.camera, &truth, &mesh);
+        let seen = rays.seen_side(&mesh, tau);
+        let excess = rays.silhouette_excess(&mesh);
         let iou = volume_iou_of(&mesh, &truth, IOU_CELLS)?;
         let noise = Noise::kinect();
         let sigma = |z| noise.sigma(z);

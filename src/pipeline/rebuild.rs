@@ -309,17 +309,16 @@ mod tests {
         Membranes::new(&MembraneConfig::default(), &PipelineConfig::default()).unwrap()
     }
 
+    /// A rebuild of [`sphere_model`] as the stream's frame `frame`.
+    fn sphere_rebuild(workers: &Workers, frame: u64, urgency: Urgency) -> Pending {
+        workers.start(sphere_model(), 2500, Budget::iterations(40), frame, urgency)
+    }
+
     #[test]
     fn a_rebuild_is_adopted_after_its_lag_and_wraps_the_model() {
         let membranes = membranes();
         let workers = membranes.rebuild.as_ref().expect("on by default");
-        let pending = workers.start(
-            sphere_model(),
-            2500,
-            Budget::iterations(40),
-            10,
-            Urgency::Awaited,
-        );
+        let pending = sphere_rebuild(workers, 10, Urgency::Awaited);
         // Lag 3 (the default): frames 11 and 12 may not adopt it, even waiting.
         assert!(matches!(pending.adopt(11, true), Adopt::NotYet));
         assert!(matches!(pending.adopt(12, true), Adopt::NotYet));
@@ -341,13 +340,7 @@ mod tests {
     fn a_hastened_rebuild_is_due_by_the_frame_it_names() {
         let membranes = membranes();
         let workers = membranes.rebuild.as_ref().unwrap();
-        let mut pending = workers.start(
-            sphere_model(),
-            2500,
-            Budget::iterations(40),
-            10,
-            Urgency::Awaited,
-        );
+        let mut pending = sphere_rebuild(workers, 10, Urgency::Awaited);
         assert!(!pending.is_hastened() && !pending.is_due(11));
         pending.hasten(11);
         assert!(pending.is_hastened() && pending.is_due(11));
@@ -363,20 +356,8 @@ mod tests {
         let workers = membranes.rebuild.as_ref().unwrap();
         // The one worker is kept busy by the first rebuild; the second,
         // queued behind it, is dropped before it starts.
-        let busy = workers.start(
-            sphere_model(),
-            2500,
-            Budget::iterations(40),
-            0,
-            Urgency::Idle,
-        );
-        let dropped = workers.start(
-            sphere_model(),
-            2500,
-            Budget::iterations(40),
-            0,
-            Urgency::Idle,
-        );
+        let busy = sphere_rebuild(workers, 0, Urgency::Idle);
+        let dropped = sphere_rebuild(workers, 0, Urgency::Idle);
         let rx = dropped.rx.clone();
         drop(dropped);
         assert!(matches!(busy.adopt(3, true), Adopt::Surface(_)));

@@ -29,8 +29,7 @@ use crate::cloud::{Aabb, Vec3};
 use crate::mesh::TriMesh;
 
 /// A mesh with its ray-casting hierarchy, built once for every metric of
-/// one frame ([`seen_side_accuracy_of`], [`points_outside_of`],
-/// [`volume_iou_of`]).
+/// one frame ([`TruthRays`], [`points_outside_of`], [`volume_iou_of`]).
 pub struct CastMesh<'a> {
     /// The mesh.
     pub mesh: &'a TriMesh,
@@ -92,37 +91,103 @@ pub fn seen_side_accuracy_of(
     recon: &CastMesh<'_>,
     tau: f64,
 ) -> SeenSide {
-    let (t, r) = (&truth.caster, &recon.caster);
-    let Some((i0, i1, j0, j1)) = pixel_rect(camera, &Isometry3::identity(), &truth.mesh.aabb())
-    else {
-        return SeenSide { rays: 0, within: 0 };
-    };
-    let origin = Vec3::zeros();
-    let counts = (j0..=j1)
-        .into_par_iter()
-        .map(|j| {
-            let mut c = (0usize, 0usize);
-            for i in i0..=i1 {
-                let d = camera.pixel_ray(i, j);
-                let Some(h) = t.first_hit(&origin, &d, camera.max_depth) else {
-                    continue;
-                };
-                if h.t < camera.min_depth {
-                    continue;
-                }
-                c.0 += 1;
-                let near = r.first_hit(&origin, &d, h.t + tau);
-                if near.is_some_and(|g| (g.t - h.t).abs() <= tau) {
-                    c.1 += 1;
-                }
-            }
-            c
-        })
-        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-    SeenSide {
-        rays: counts.0,
-        within: counts.1,
+    TruthRays::new(camera, truth, recon).seen_side(recon, tau)
+}
+
+/// The true object's first hit on each pixel ray of `camera` over the
+/// image rectangle of the true object and a reconstruction, cast once for
+/// the frame's [`SeenSide`] and [`SilhouetteExcess`].
+pub struct TruthRays<'c> {
+    camera: &'c Camera,
+    /// The pixel rectangle `(i0, i1, j0, j1)`, `None` when out of view.
+    rect: Option<(usize, usize, usize, usize)>,
+    /// Row by row over `rect`: the ray parameter of the true first hit,
+    /// when it lies within the camera's depth range.
+    hits: Vec<Vec<Option<f64>>>,
+}
+
+impl<'c> TruthRays<'c> {
+    /// Cast `truth` (in the camera's optical frame) over the rectangle of
+    /// both `truth` and `recon`.
+    pub fn new(camera: &'c Camera, truth: &CastMesh<'_>, recon: &CastMesh<'_>) -> Self {
+        let mut bounds = truth.mesh.aabb();
+        let r = recon.mesh.aabb();
+        bounds.min = bounds.min.inf(&r.min);
+        bounds.max = bounds.max.sup(&r.max);
+        let rect = pixel_rect(camera, &Isometry3::identity(), &bounds);
+        let hits = rect.map_or_else(Vec::new, |(i0, i1, j0, j1)| {
+            (j0..=j1)
+                .into_par_iter()
+                .map(|j| (i0..=i1).map(|i| first_hit(camera, truth, i, j)).collect())
+                .collect()
+        });
+        Self { camera, rect, hits }
     }
+
+    /// The seen-side accuracy of `recon` ([`seen_side_accuracy`]).
+    pub fn seen_side(&self, recon: &CastMesh<'_>, tau: f64) -> SeenSide {
+        let Some((i0, _, j0, _)) = self.rect else {
+            return SeenSide { rays: 0, within: 0 };
+        };
+        let origin = Vec3::zeros();
+        let (rays, within) = self
+            .hits
+            .par_iter()
+            .enumerate()
+            .map(|(b, row)| {
+                let mut c = (0usize, 0usize);
+                for (a, t) in row.iter().enumerate() {
+                    let Some(t) = *t else { continue };
+                    c.0 += 1;
+                    let d = self.camera.pixel_ray(i0 + a, j0 + b);
+                    let near = recon.caster.first_hit(&origin, &d, t + tau);
+                    if near.is_some_and(|g| (g.t - t).abs() <= tau) {
+                        c.1 += 1;
+                    }
+                }
+                c
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        SeenSide { rays, within }
+    }
+
+    /// The silhouette excess of `recon` ([`silhouette_excess_of`]).
+    pub fn silhouette_excess(&self, recon: &CastMesh<'_>) -> SilhouetteExcess {
+        let Some((i0, i1, j0, _)) = self.rect else {
+            return SilhouetteExcess {
+                silhouette: 0,
+                excess: 0,
+            };
+        };
+        let (width, rows) = (i1 - i0 + 1, self.hits.len());
+        let near_truth = |a: usize, b: usize| {
+            (b.saturating_sub(1)..=(b + 1).min(rows - 1)).any(|y| {
+                (a.saturating_sub(1)..=(a + 1).min(width - 1)).any(|x| self.hits[y][x].is_some())
+            })
+        };
+        let excess = (0..rows)
+            .into_par_iter()
+            .map(|b| {
+                (0..width)
+                    .filter(|&a| {
+                        !near_truth(a, b) && first_hit(self.camera, recon, i0 + a, j0 + b).is_some()
+                    })
+                    .count()
+            })
+            .sum();
+        let silhouette = self.hits.iter().flatten().filter(|h| h.is_some()).count();
+        SilhouetteExcess { silhouette, excess }
+    }
+}
+
+/// The ray parameter of `mesh`'s first hit on the ray of pixel `(i, j)`,
+/// when it lies within the camera's depth range.
+fn first_hit(camera: &Camera, mesh: &CastMesh<'_>, i: usize, j: usize) -> Option<f64> {
+    let d = camera.pixel_ray(i, j);
+    mesh.caster
+        .first_hit(&Vec3::zeros(), &d, camera.max_depth)
+        .map(|h| h.t)
+        .filter(|&t| t >= camera.min_depth)
 }
 
 /// Result of [`silhouette_excess_of`].
@@ -154,43 +219,7 @@ pub fn silhouette_excess_of(
     truth: &CastMesh<'_>,
     recon: &CastMesh<'_>,
 ) -> SilhouetteExcess {
-    let none = SilhouetteExcess {
-        silhouette: 0,
-        excess: 0,
-    };
-    let mut bounds = truth.mesh.aabb();
-    let r = recon.mesh.aabb();
-    bounds.min = bounds.min.inf(&r.min);
-    bounds.max = bounds.max.sup(&r.max);
-    let Some((i0, i1, j0, j1)) = pixel_rect(camera, &Isometry3::identity(), &bounds) else {
-        return none;
-    };
-    let origin = Vec3::zeros();
-    let hits = |mesh: &CastMesh<'_>, i: usize, j: usize| {
-        let d = camera.pixel_ray(i, j);
-        mesh.caster
-            .first_hit(&origin, &d, camera.max_depth)
-            .is_some_and(|h| h.t >= camera.min_depth)
-    };
-    let width = i1 - i0 + 1;
-    let on_truth: Vec<Vec<bool>> = (j0..=j1)
-        .into_par_iter()
-        .map(|j| (i0..=i1).map(|i| hits(truth, i, j)).collect())
-        .collect();
-    let near_truth = |i: usize, j: usize| {
-        (j.saturating_sub(1)..=(j + 1).min(on_truth.len() - 1))
-            .any(|b| (i.saturating_sub(1)..=(i + 1).min(width - 1)).any(|a| on_truth[b][a]))
-    };
-    let excess = (0..on_truth.len())
-        .into_par_iter()
-        .map(|b| {
-            (0..width)
-                .filter(|&a| !near_truth(a, b) && hits(recon, i0 + a, j0 + b))
-                .count()
-        })
-        .sum();
-    let silhouette = on_truth.iter().flatten().filter(|&&h| h).count();
-    SilhouetteExcess { silhouette, excess }
+    TruthRays::new(camera, truth, recon).silhouette_excess(recon)
 }
 
 /// Result of [`points_outside`].
