@@ -46,6 +46,11 @@ fn the_true_mesh_scores_the_whole_seen_side_and_a_moved_copy_little() {
             frame.visible_points
         );
         assert!(exact.accuracy().unwrap() >= 0.99, "{exact:?}");
+        // The rim: a ring one pixel wide around a silhouette a few
+        // thousand pixels large, exact on the true mesh itself.
+        let rim_share = exact.rim_rays as f64 / exact.rays as f64;
+        assert!((0.03..0.5).contains(&rim_share), "{exact:?}");
+        assert!(exact.rim_accuracy().unwrap() >= 0.99, "{exact:?}");
         let mut moved = posed.clone();
         for v in &mut moved.vertices {
             v.z += 3.0 * tau;
@@ -53,6 +58,21 @@ fn the_true_mesh_scores_the_whole_seen_side_and_a_moved_copy_little() {
         let off = seen_side_accuracy(&frame.camera, &posed, &moved, tau).unwrap();
         assert_eq!(off.rays, exact.rays);
         assert!(off.accuracy().unwrap() < 0.1, "{off:?}");
+        assert_eq!(off.rim_rays, exact.rim_rays);
+        assert!(off.rim_accuracy().unwrap() < 0.1, "{off:?}");
+        // Shrunk about its centre by a millimetre: the inside keeps its
+        // depth within τ, the rim, which the rays graze, does not.
+        let c = posed.aabb().center();
+        let mut shrunk = posed.clone();
+        for v in &mut shrunk.vertices {
+            *v = c + (*v - c) * (1.0 - 0.001 / (0.5 * posed.aabb().longest_edge()));
+        }
+        let small = seen_side_accuracy(&frame.camera, &posed, &shrunk, tau).unwrap();
+        let (rim, inner) = (
+            small.rim_accuracy().unwrap(),
+            small.inner_accuracy().unwrap(),
+        );
+        assert!(rim < inner - 0.1, "{small:?}");
     }
 }
 
@@ -131,7 +151,7 @@ fn replay_prints_every_view_score_per_frame_and_per_third() {
     let out = common::sepmem_stdout(&[std::ffi::OsStr::new("replay"), mug_bag().as_os_str()]);
     let header = out.lines().find(|l| l.starts_with("stream")).unwrap();
     let cols = [
-        "F", "seen", "IoU", "rot", "tr_mm", "cover", "out3s", "excess",
+        "F", "seen", "IoU", "rot", "tr_mm", "cover", "out3s", "excess", "rim",
     ]
     .map(|c| column(header, c));
     let rows: Vec<Vec<f64>> = out
@@ -148,7 +168,7 @@ fn replay_prints_every_view_score_per_frame_and_per_third() {
         assert!(r.iter().all(|x| x.is_finite()), "{k}: {r:?}");
         // (The silhouette excess, a share of the silhouette's pixels, could
         // pass 1 for a mesh far larger than the object; the mug's does not.)
-        for &share in &[r[0], r[1], r[2], r[5], r[6], r[7]] {
+        for &share in &[r[0], r[1], r[2], r[5], r[6], r[7], r[8]] {
             assert!((0.0..=1.0).contains(&share), "{k}: {r:?}");
         }
         assert!((0.0..=180.0).contains(&r[3]) && r[4] >= 0.0, "{k}: {r:?}");
@@ -165,6 +185,7 @@ fn replay_prints_every_view_score_per_frame_and_per_third() {
         "first third (10): F ",
         "last third (10): F ",
         "seen side median ",
+        "on the silhouette's rim median ",
         "pose error max rot ",
         "points outside by > 3 sigma ",
         "silhouette excess median ",

@@ -18,7 +18,8 @@
 //! camera saw, and the closure of the unseen side (extent along the viewing
 //! ray); the summary gives per-stream means and minima. The robot's-view
 //! scores of [`sepmem::eval::view`] follow at the end of each row (`seen`
-//! side depth accuracy, volume `IoU` with the true solid, `rot` (°) and
+//! side depth accuracy, `rim`: the same on the silhouette's rim alone,
+//! volume `IoU` with the true solid, `rot` (°) and
 //! `tr_mm` error of the tracked pose, `cover`: share of the true surface
 //! seen so far, `out3s`: share of the points on the true surface that lie
 //! outside the mesh by more than 3σ of the sensor noise, `excess`: the
@@ -273,8 +274,8 @@ pub fn run_opts(
     }
     if scored {
         header += &format!(
-            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
-            "seen", "IoU", "rot", "tr_mm", "cover", "out3s", "excess"
+            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
+            "seen", "rim", "IoU", "rot", "tr_mm", "cover", "out3s", "excess"
         );
     }
     print(header);
@@ -581,16 +582,18 @@ fn view_score(
     Ok(Some(v))
 }
 
-/// The per-frame columns `seen IoU rot tr_mm cover out3s excess` (dashes
-/// without a score); `out3s` is the share of the points on the true surface
+/// The per-frame columns `seen rim IoU rot tr_mm cover out3s excess`
+/// (dashes without a score); `rim` is the seen side on the silhouette's
+/// rim alone, `out3s` the share of the points on the true surface
 /// that lie outside the mesh by more than 3σ, `excess` the mesh's
 /// projection beyond the true silhouette, as a share of the silhouette.
 fn view_columns(v: Option<&ViewScore>) -> String {
     let opt = |x: Option<f64>| x.map_or_else(|| "-".to_string(), |x| format!("{x:.3}"));
     match v {
         Some(v) => format!(
-            " {:>6} {:>6} {:>6.2} {:>6.1} {:>6.3} {:>6} {:>6}",
+            " {:>6} {:>6} {:>6} {:>6.2} {:>6.1} {:>6.3} {:>6} {:>6}",
             opt(v.seen_side),
+            opt(v.seen_side_rim),
             opt(v.volume_iou),
             v.rotation_deg,
             v.translation_mm,
@@ -599,16 +602,16 @@ fn view_columns(v: Option<&ViewScore>) -> String {
             opt(v.silhouette_excess)
         ),
         None => format!(
-            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
-            "-", "-", "-", "-", "-", "-", "-"
+            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
+            "-", "-", "-", "-", "-", "-", "-", "-"
         ),
     }
 }
 
 /// The `view` summary line of a stream: the whole-object F, seen side,
 /// volume IoU, pose error and coverage over the first and the last third
-/// of its scored frames (means), the median seen side over all frames,
-/// the largest pose error, the points left out and the silhouette excess
+/// of its scored frames (means), the median seen side over all frames
+/// (and on the silhouette's rim alone), the largest pose error, the points left out and the silhouette excess
 /// (median and largest over the frames).
 fn view_summary(id: &str, st: &StreamSummary) -> String {
     let n = st.views.len().min(st.scores.len());
@@ -630,17 +633,20 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
     let views = &st.views[..n];
     let mut seen: Vec<f64> = views.iter().filter_map(|v| v.seen_side).collect();
     seen.sort_by(f64::total_cmp);
+    let mut rim: Vec<f64> = views.iter().filter_map(|v| v.seen_side_rim).collect();
+    rim.sort_by(f64::total_cmp);
     let all = |g: fn(&ViewScore) -> f64| views.iter().map(g).collect::<Vec<_>>();
     let mut excess: Vec<f64> = views.iter().filter_map(|v| v.silhouette_excess).collect();
     excess.sort_by(f64::total_cmp);
     let on_surface: usize = views.iter().map(|v| v.outside.on_surface).sum();
     let outside: usize = views.iter().map(|v| v.outside.outside).sum();
     format!(
-        "view {id}: {n} frames; first third ({third}): {}; last third ({third}): {}; seen side median {:.3} min {:.3}; pose error max rot {:.2} deg trans {:.1} mm; points outside by > 3 sigma {outside} of {on_surface} ({} frames with any), worst {:.1} sigma; silhouette excess median {:.3} max {:.3}",
+        "view {id}: {n} frames; first third ({third}): {}; last third ({third}): {}; seen side median {:.3} min {:.3} (on the silhouette's rim median {:.3}); pose error max rot {:.2} deg trans {:.1} mm; points outside by > 3 sigma {outside} of {on_surface} ({} frames with any), worst {:.1} sigma; silhouette excess median {:.3} max {:.3}",
         part(0..third),
         part(n - third..n),
         percentile(&seen, 0.5),
         min(&seen),
+        percentile(&rim, 0.5),
         max(&all(|v| v.rotation_deg)),
         max(&all(|v| v.translation_mm)),
         views.iter().filter(|v| v.outside.outside > 0).count(),

@@ -6,6 +6,9 @@
 //!   object and whose first hit on the mesh lies within τ of the true depth
 //!   ([`crate::synth::view_metrics::seen_side_accuracy`]; τ is
 //!   `metrics.tau` times the true object's longest edge, the F-score's τ);
+//!   — and on the silhouette's **rim** alone, the rays one pixel from a
+//!   ray that misses the object, which graze its surface (there a lateral
+//!   error of a fraction of a millimetre is a depth error beyond τ);
 //! - **volume IoU** of the mesh with the true solid, by inside tests on a
 //!   grid of [`IOU_CELLS`] cells along the longest edge of both meshes'
 //!   joint box (the estimate's error falls as 1/cells: within 0.02 at 40
@@ -66,6 +69,8 @@ const COVERAGE_SEED: u64 = 20;
 pub struct ViewScore {
     /// Seen-side depth accuracy (`None` when the camera does not see the object).
     pub seen_side: Option<f64>,
+    /// The seen-side accuracy on the silhouette's rim alone.
+    pub seen_side_rim: Option<f64>,
     /// Volume IoU with the true solid (`None` when both are empty).
     pub volume_iou: Option<f64>,
     /// Rotation error of the tracked pose (degrees).
@@ -134,6 +139,7 @@ impl ViewTracker {
         let coverage = self.coverage_after(f)?;
         Ok(ViewScore {
             seen_side: seen.accuracy(),
+            seen_side_rim: seen.rim_accuracy(),
             volume_iou: iou.iou(),
             rotation_deg: err.rotation_rad.to_degrees(),
             translation_mm: err.translation_m * 1e3,
