@@ -3,6 +3,7 @@
 
 Usage: poisson_oracle.py BAG [--sepmem PATH] [--depth 8] [--crop 0.02]
                              [--samples 10000] [--tau 0.01] [--frames N]
+                             [--seen]
 
 BAG is a sequence written by `sepmem synth` (its clouds and its
 `/synth/ground_truth`). For every frame k of every stream, the oracle:
@@ -22,7 +23,14 @@ BAG is a sequence written by `sepmem synth` (its clouds and its
    1), --samples area-uniform samples on each, F-score at --tau.
 
 It prints one line per frame and, per stream, the mean F over the first and
-the last third of the frames. With --sepmem, it also runs `sepmem replay BAG
+the last third of the frames. With --seen it also measures the seen side
+as `sepmem replay` does (`synth::view_metrics`): over the camera's pixel
+rays that hit the posed true mesh, the share whose first hit on the mesh
+lies within tau (times the truth's longest edge) of the true depth, and the
+same on the silhouette's rim alone (a true hit with one of its 8
+neighbours missing). It does so for the fused oracle and for Poisson on the
+frame's own view alone (the issue's "as exact as a Poisson reconstruction
+of that frame"), and prints their medians over the frames. With --sepmem, it also runs `sepmem replay BAG
 -q` on the same bag and prints sepmem's first- and last-third F beside the
 oracle's (the issue asks for both in the same run).
 
@@ -82,7 +90,10 @@ def stamp(header):
     return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
 
 
-Frame = collections.namedtuple('Frame', 'stamp points pose mesh_id')
+Frame = collections.namedtuple('Frame', 'stamp points pose mesh_id camera')
+
+# The pinhole camera of a frame: (fx, fy, cx, cy, width, height).
+Camera = collections.namedtuple('Camera', 'fx fy cx cy width height')
 
 
 def read(bag):
@@ -92,7 +103,8 @@ def read(bag):
         for conn, _t, raw in reader.messages():
             if conn.msgtype == TRUTH:
                 m = reader.deserialize(raw, conn.msgtype)
-                truths[(m.stream_id, stamp(m.header))] = (isometry(m.pose), m.mesh_id)
+                camera = Camera(m.fx, m.fy, m.cx, m.cy, m.width, m.height)
+                truths[(m.stream_id, stamp(m.header))] = (isometry(m.pose), m.mesh_id, camera)
                 if len(m.vertices):
                     v = np.array([[p.x, p.y, p.z] for p in m.vertices])
                     t = np.array([list(tr.vertex_indices) for tr in m.triangles])
@@ -105,8 +117,8 @@ def read(bag):
         seq = []
         for s, pts in frames:
             if (topic, s) in truths:
-                pose, mesh_id = truths[(topic, s)]
-                seq.append(Frame(s, pts, pose, mesh_id))
+                pose, mesh_id, camera = truths[(topic, s)]
+                seq.append(Frame(s, pts, pose, mesh_id, camera))
         if seq:
             streams[topic] = seq
     return streams, meshes
@@ -166,6 +178,53 @@ def f_score(pred, truth, samples, tau):
     return 0.0 if precision + recall == 0 else 2 * precision * recall / (precision + recall)
 
 
+# The camera's depth range (synth::Camera's default), as `replay` casts.
+MIN_DEPTH, MAX_DEPTH = 0.3, 8.0
+
+
+def first_hits(mesh, cam, rect):
+    """Depth of the first hit of each pixel ray of `rect` on `mesh` (NaN for
+    none within the depth range); the rays are (x, y, 1), so t is depth."""
+    i0, i1, j0, j1 = rect
+    ii, jj = np.meshgrid(np.arange(i0, i1 + 1), np.arange(j0, j1 + 1))
+    d = np.stack([(ii + 0.5 - cam.cx) / cam.fx, (jj + 0.5 - cam.cy) / cam.fy,
+                  np.ones_like(ii, dtype=float)], axis=-1)
+    rays = np.concatenate([np.zeros_like(d), d], axis=-1).astype(np.float32)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
+    t = scene.cast_rays(o3d.core.Tensor(rays))['t_hit'].numpy()
+    return np.where((t >= MIN_DEPTH) & (t <= MAX_DEPTH), t, np.nan)
+
+
+def seen_side(truth, mesh, cam, tau):
+    """(seen side, seen side on the rim) of `mesh` against `truth` (module
+    docs); NaN where the camera does not see the object."""
+    v = np.asarray(truth.vertices)
+    front = v[v[:, 2] > 0]
+    if len(front) == 0 or len(mesh.triangles) == 0:
+        return float('nan'), float('nan')
+    u = cam.fx * front[:, 0] / front[:, 2] + cam.cx
+    w = cam.fy * front[:, 1] / front[:, 2] + cam.cy
+    rect = (max(int(u.min()) - 2, 0), min(int(u.max()) + 2, cam.width - 1),
+            max(int(w.min()) - 2, 0), min(int(w.max()) + 2, cam.height - 1))
+    true_t = first_hits(truth, cam, rect)
+    mesh_t = first_hits(mesh, cam, rect)
+    hit = ~np.isnan(true_t)
+    if not hit.any():
+        return float('nan'), float('nan')
+    tau_m = tau * (v.max(axis=0) - v.min(axis=0)).max()
+    within = hit & (np.abs(np.nan_to_num(mesh_t, nan=np.inf) - true_t) <= tau_m)
+    padded = np.pad(hit, 1, constant_values=False)
+    rows, cols = hit.shape
+    all_neighbours = np.ones_like(hit)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            all_neighbours &= padded[1 + dy:1 + dy + rows, 1 + dx:1 + dx + cols]
+    rim = hit & ~all_neighbours
+    share = within[hit].mean()
+    return float(share), float(within[rim].mean()) if rim.any() else float('nan')
+
+
 def posed_truth(meshes, topic, frame):
     v, t = meshes[(topic, frame.mesh_id)]
     return o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(transform(frame.pose, v)),
@@ -197,6 +256,9 @@ def main():
     ap.add_argument('--samples', type=int, default=10000)
     ap.add_argument('--tau', type=float, default=0.01)
     ap.add_argument('--frames', type=int, default=0, help='score only the first N frames (0: all)')
+    ap.add_argument('--seen', action='store_true',
+                    help="also the seen side (and on the rim) of the oracle and of Poisson on "
+                         "each frame's own view")
     args = ap.parse_args()
 
     streams, meshes = read(args.bag)
@@ -207,13 +269,25 @@ def main():
         if args.frames:
             frames = frames[:args.frames]
         views = [view_cloud(f.points) for f in frames]
-        scores = []
+        scores, seen = [], []
         for k, frame in enumerate(frames):
             mesh = poisson(fused(frames, k, views), args.depth, args.crop)
-            scores.append(f_score(mesh, posed_truth(meshes, topic, frame), args.samples, args.tau))
-            print(f'{topic} frame {k} points {len(frame.points)} oracle F {scores[-1]:.3f}', flush=True)
+            truth = posed_truth(meshes, topic, frame)
+            scores.append(f_score(mesh, truth, args.samples, args.tau))
+            line = f'{topic} frame {k} points {len(frame.points)} oracle F {scores[-1]:.3f}'
+            if args.seen:
+                single = poisson(views[k], args.depth, args.crop)
+                seen.append(seen_side(truth, mesh, frame.camera, args.tau)
+                            + seen_side(truth, single, frame.camera, args.tau))
+                line += ' seen side {:.3f} rim {:.3f}; one view: seen side {:.3f} rim {:.3f}'.format(
+                    *seen[-1])
+            print(line, flush=True)
         first, last = thirds(scores)
         line = f'oracle {topic}: {len(scores)} frames; first third F {first:.3f}; last third F {last:.3f}'
+        if seen:
+            med = np.nanmedian(np.array(seen), axis=0)
+            line += ('; seen side median {:.3f} (rim {:.3f}); Poisson of each frame alone: '
+                     'seen side median {:.3f} (rim {:.3f})').format(*med)
         if topic in ours:
             line += f'; sepmem first third F {ours[topic][0]:.3f}; last third F {ours[topic][1]:.3f}'
         print(line, flush=True)
