@@ -35,8 +35,9 @@
 //! surface's own curvature along the sample rows and columns) plus the
 //! facets' mean inset `(κᵤ cᵤ² + κᵥ cᵥ²) / 12` (so that the triangles
 //! straddle the spline, with zero mean offset; only along edges that turn
-//! the normal by at most [`MAX_EDGE_TURN`]), bounded by `max_delta`·δ. It is applied to the mesh a frame publishes only: the
-//! warm chain and the tracking keep the membrane's own surface. Measured on
+//! the normal by at most [`MAX_EDGE_TURN`]), bounded by `max_delta`·δ. It
+//! is applied to the mesh a frame publishes only: the warm chain and the
+//! tracking keep the membrane's own surface. Measured on
 //! the 23 sensor-true sequences of `benches/robot_view_eval.sh` (same
 //! tracking, so the meshes differ by the move alone): seen-side median
 //! 0.820 -> 0.874 (15 used while tuning) and 0.879 -> 0.905 (8 held out),
@@ -45,9 +46,9 @@
 //! sequences of that script (against the centring's move alone, same
 //! tracking): seen-side median 0.898 -> 0.909 (higher on 32, lower on 5),
 //! median last-third F 0.727 -> 0.734 (mean 0.709 -> 0.712), points more
-//! than 3σ outside the mesh 0.58 % -> 0.56 %; a drifting bowl loses 0.007; a sample grid twice as fine
-//! for the published mesh instead gave 0.904 and 0.733 at four times the
-//! vertices.
+//! than 3σ outside the mesh 0.58 % -> 0.56 %; a drifting bowl loses
+//! 0.007. A sample grid twice as fine for the published mesh instead gave
+//! 0.904 and 0.733, at four times the vertices.
 
 use super::config::StepConfig;
 use super::step::cross_section;

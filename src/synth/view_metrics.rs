@@ -193,12 +193,24 @@ impl<'c> TruthRays<'c> {
     /// Whether the true hit at `(a, b)` of the rectangle has a neighbour
     /// (of 8, beyond the rectangle included) that misses the true object.
     fn on_rim(&self, a: usize, b: usize) -> bool {
+        self.around(a, b).any(|hit| !hit)
+    }
+
+    /// Whether the true object is hit at `(a, b)` of the rectangle or one
+    /// of its 8 neighbours.
+    fn near_truth(&self, a: usize, b: usize) -> bool {
+        self.around(a, b).any(|hit| hit)
+    }
+
+    /// Whether each ray of the 3×3 block around `(a, b)` of the rectangle
+    /// hits the true object (none beyond the rectangle does).
+    fn around(&self, a: usize, b: usize) -> impl Iterator<Item = bool> + '_ {
         let hit = |x: Option<usize>, y: Option<usize>| {
             let row = y.and_then(|y| self.hits.get(y));
             row.and_then(|r| r.get(x?)).is_some_and(Option::is_some)
         };
-        (-1..=1).any(|dy: isize| {
-            (-1..=1).any(|dx: isize| !hit(a.checked_add_signed(dx), b.checked_add_signed(dy)))
+        (-1..=1).flat_map(move |dy: isize| {
+            (-1..=1).map(move |dx: isize| hit(a.checked_add_signed(dx), b.checked_add_signed(dy)))
         })
     }
 
@@ -211,17 +223,13 @@ impl<'c> TruthRays<'c> {
             };
         };
         let (width, rows) = (i1 - i0 + 1, self.hits.len());
-        let near_truth = |a: usize, b: usize| {
-            (b.saturating_sub(1)..=(b + 1).min(rows - 1)).any(|y| {
-                (a.saturating_sub(1)..=(a + 1).min(width - 1)).any(|x| self.hits[y][x].is_some())
-            })
-        };
         let excess = (0..rows)
             .into_par_iter()
             .map(|b| {
                 (0..width)
                     .filter(|&a| {
-                        !near_truth(a, b) && first_hit(self.camera, recon, i0 + a, j0 + b).is_some()
+                        !self.near_truth(a, b)
+                            && first_hit(self.camera, recon, i0 + a, j0 + b).is_some()
                     })
                     .count()
             })
