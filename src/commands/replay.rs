@@ -611,8 +611,8 @@ fn view_columns(v: Option<&ViewScore>) -> String {
 /// The `view` summary line of a stream: the whole-object F, seen side,
 /// volume IoU, pose error and coverage over the first and the last third
 /// of its scored frames (means), the median seen side over all frames
-/// (and on the silhouette's rim alone), the largest pose error, the points left out and the silhouette excess
-/// (median and largest over the frames).
+/// (and on the silhouette's rim alone), the largest pose error, the points
+/// left out and the silhouette excess (median and largest over the frames).
 fn view_summary(id: &str, st: &StreamSummary) -> String {
     let n = st.views.len().min(st.scores.len());
     let third = n.div_ceil(3);
@@ -631,13 +631,16 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
         )
     };
     let views = &st.views[..n];
-    let mut seen: Vec<f64> = views.iter().filter_map(|v| v.seen_side).collect();
-    seen.sort_by(f64::total_cmp);
-    let mut rim: Vec<f64> = views.iter().filter_map(|v| v.seen_side_rim).collect();
-    rim.sort_by(f64::total_cmp);
+    // The frames' values of an optional score, sorted.
+    let sorted = |g: fn(&ViewScore) -> Option<f64>| {
+        let mut v: Vec<f64> = views.iter().filter_map(g).collect();
+        v.sort_by(f64::total_cmp);
+        v
+    };
+    let seen = sorted(|v| v.seen_side);
+    let rim = sorted(|v| v.seen_side_rim);
+    let excess = sorted(|v| v.silhouette_excess);
     let all = |g: fn(&ViewScore) -> f64| views.iter().map(g).collect::<Vec<_>>();
-    let mut excess: Vec<f64> = views.iter().filter_map(|v| v.silhouette_excess).collect();
-    excess.sort_by(f64::total_cmp);
     let on_surface: usize = views.iter().map(|v| v.outside.on_surface).sum();
     let outside: usize = views.iter().map(|v| v.outside.outside).sum();
     format!(

@@ -51,7 +51,7 @@ impl<'a> CastMesh<'a> {
 }
 
 /// Result of [`seen_side_accuracy`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct SeenSide {
     /// Pixel rays whose first hit is on the true mesh (within the depth range).
     pub rays: usize,
@@ -148,14 +148,8 @@ impl<'c> TruthRays<'c> {
 
     /// The seen-side accuracy of `recon` ([`seen_side_accuracy`]).
     pub fn seen_side(&self, recon: &CastMesh<'_>, tau: f64) -> SeenSide {
-        let empty = SeenSide {
-            rays: 0,
-            within: 0,
-            rim_rays: 0,
-            rim_within: 0,
-        };
         let Some((i0, _, j0, _)) = self.rect else {
-            return empty;
+            return SeenSide::default();
         };
         let origin = Vec3::zeros();
         let add = |a: SeenSide, b: SeenSide| SeenSide {
@@ -168,26 +162,21 @@ impl<'c> TruthRays<'c> {
             .par_iter()
             .enumerate()
             .map(|(b, row)| {
-                let mut c = empty;
+                let mut c = SeenSide::default();
                 for (a, t) in row.iter().enumerate() {
                     let Some(t) = *t else { continue };
                     let d = self.camera.pixel_ray(i0 + a, j0 + b);
                     let near = recon.caster.first_hit(&origin, &d, t + tau);
                     let ok = near.is_some_and(|g| (g.t - t).abs() <= tau);
                     let rim = self.on_rim(a, b);
-                    c = add(
-                        c,
-                        SeenSide {
-                            rays: 1,
-                            within: usize::from(ok),
-                            rim_rays: usize::from(rim),
-                            rim_within: usize::from(rim && ok),
-                        },
-                    );
+                    c.rays += 1;
+                    c.within += usize::from(ok);
+                    c.rim_rays += usize::from(rim);
+                    c.rim_within += usize::from(rim && ok);
                 }
                 c
             })
-            .reduce(|| empty, add)
+            .reduce(SeenSide::default, add)
     }
 
     /// Whether the true hit at `(a, b)` of the rectangle has a neighbour
@@ -262,7 +251,7 @@ pub struct SilhouetteExcess {
 impl SilhouetteExcess {
     /// `excess / silhouette`, `None` when the camera does not see the object.
     pub fn share(&self) -> Option<f64> {
-        (self.silhouette > 0).then(|| self.excess as f64 / self.silhouette as f64)
+        share(self.excess, self.silhouette)
     }
 }
 
