@@ -558,6 +558,43 @@ pub struct ViewConfig {
     /// The mirrored completion of a fused cloud's latest view while its
     /// model holds few views ([`super::view`], 6.); `None` turns it off.
     pub fused_completion: Option<FusedCompletionConfig>,
+    /// The completion of a fused cloud that is a surface of revolution
+    /// ([`super::revolution`]); `None` turns it off.
+    pub revolution: Option<RevolutionConfig>,
+}
+
+/// `membrane.view.revolution`: when a fused cloud counts as a surface of
+/// revolution, and which of its revolved points complete it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RevolutionConfig {
+    /// Largest median |sin ψ| between a normal and the plane through the
+    /// axis (0 on a surface of revolution).
+    pub max_sin: f64,
+    /// Largest median distance of a point to its ring, in δ.
+    pub max_ring_delta: f64,
+    /// The smallest ring is at most this share of the largest: the axis
+    /// passes through the object (not a torus arc's bend centre).
+    pub max_ring_ratio: f64,
+    /// Largest share of the revolved points that some view saw empty.
+    pub max_contradicted: f64,
+    /// Revolved points within this many δ of a fused point are dropped.
+    pub gap_delta: f64,
+    /// At most this many revolved points per fused point.
+    pub max_added: f64,
+}
+
+impl Default for RevolutionConfig {
+    fn default() -> Self {
+        Self {
+            max_sin: 0.1,
+            max_ring_delta: 1.5,
+            max_ring_ratio: 0.7,
+            max_contradicted: 0.1,
+            gap_delta: 3.0,
+            max_added: 1.5,
+        }
+    }
 }
 
 /// `membrane.view.fused_completion`: when a fused cloud is completed, and
@@ -603,6 +640,7 @@ impl Default for ViewConfig {
             completion: Completion::None,
             back: None,
             fused_completion: None,
+            revolution: None,
         }
     }
 }
@@ -681,7 +719,31 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), ConfigError> {
             .is_none_or(|f| non_negative(f.gap_delta)),
         "view.fused_completion.gap_delta",
         "must be a finite value >= 0",
-    )
+    )?;
+    validate_revolution(cfg.view.revolution.as_ref())
+}
+
+fn validate_revolution(r: Option<&RevolutionConfig>) -> Result<(), ConfigError> {
+    let Some(r) = r else {
+        return Ok(());
+    };
+    let shares = [
+        (r.max_sin, "view.revolution.max_sin"),
+        (r.max_ring_ratio, "view.revolution.max_ring_ratio"),
+        (r.max_contradicted, "view.revolution.max_contradicted"),
+    ];
+    for (v, key) in shares {
+        check((0.0..=1.0).contains(&v), key, "must lie in [0, 1]")?;
+    }
+    let positive = [
+        (r.max_ring_delta, "view.revolution.max_ring_delta"),
+        (r.gap_delta, "view.revolution.gap_delta"),
+        (r.max_added, "view.revolution.max_added"),
+    ];
+    for (v, key) in positive {
+        check(pos(v), key, "must be positive")?;
+    }
+    Ok(())
 }
 
 fn validate_prepare(p: &PrepareConfig) -> Result<(), ConfigError> {

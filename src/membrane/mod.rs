@@ -40,6 +40,7 @@ pub mod occupancy;
 pub mod pole;
 pub mod prepare;
 pub mod regularize;
+pub mod revolution;
 pub mod schedule;
 pub mod spacing;
 pub mod step;
@@ -49,8 +50,8 @@ pub mod view;
 pub use config::{
     AttributeWeight, Completion, ConfigError, EncloseConfig, FitConfig, FusedCompletionConfig,
     GrowthConfig, InitConfig, InsideDenserConfig, InwardConfig, LocalSpacingConfig, MembraneConfig,
-    PoleAxis, PoleTensionConfig, PrepareConfig, RegularizeConfig, ScheduleConfig, SearchDelta,
-    StepConfig, ViewConfig,
+    PoleAxis, PoleTensionConfig, PrepareConfig, RegularizeConfig, RevolutionConfig, ScheduleConfig,
+    SearchDelta, StepConfig, ViewConfig,
 };
 pub use extract::{extract_mesh, SEPARABILITY_CHANNEL};
 

@@ -269,10 +269,17 @@ pub(crate) fn prepare<'a>(
         vec![delta; points.len()]
     };
     let mut points = points;
-    let completed = match (view.as_mut(), free, &cfg.view.fused_completion) {
-        (None, Some(f), Some(fc)) => complete_fused(f, fc, delta, &mut points, &mut d_used),
-        (view, ..) => complete_view(cfg, view, &mut points, &mut d_used),
+    let revolved = match (view.as_ref(), free, &cfg.view.revolution) {
+        (None, Some(f), Some(rc)) => super::revolution::complete(f, rc, delta, &mut points),
+        _ => 0,
     };
+    d_used.resize(points.len(), delta);
+    let completed = revolved
+        + match (view.as_mut(), free, &cfg.view.fused_completion) {
+            (None, Some(_), _) if revolved > 0 => 0,
+            (None, Some(f), Some(fc)) => complete_fused(f, fc, delta, &mut points, &mut d_used),
+            (view, ..) => complete_view(cfg, view, &mut points, &mut d_used),
+        };
     let spacing = p
         .local_spacing
         .as_ref()

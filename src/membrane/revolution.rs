@@ -1,0 +1,425 @@
+//! Completion of a fused cloud that is a surface of revolution
+//! (`membrane.view.revolution`).
+//!
+//! A solid of revolution that turns about its own axis (a bottle or a can
+//! on a turntable, a capsule rolled in the hand) shows the camera the same
+//! silhouette in every frame: its spin cannot be registered, the tracker
+//! rightly sees it at rest, and the fused model holds one side only, however
+//! far the object turned. Its unseen side is then the membrane's initial
+//! surface, held where no view saw through: a lobe, or a flat back.
+//!
+//! The seen side says more, though. On a surface of revolution every normal
+//! line meets the axis, so the axis is the linear line complex that the
+//! normal lines `(n, p × n)` best satisfy: the eigenvector of the smallest
+//! eigenvalue of `Σ vᵢvᵢᵀ`, `vᵢ = (nᵢ, pᵢ × nᵢ)` (Pottmann, Leopoldseder and
+//! Hofer, "Registration without ICP", the line-geometric recognition of
+//! surfaces of revolution). The cloud counts as one when
+//!
+//! - its normals lie in planes through that axis (median |sin ψ| at most
+//!   `max_sin`);
+//! - its points lie on the rings of one profile `r(h)` along the axis (the
+//!   median distance to the ring at most `max_ring_delta`·δ);
+//! - the axis passes through the object: its smallest ring is at most
+//!   `max_ring_ratio` of its largest. A bent tube is a torus arc, whose axis
+//!   is its bend's centre, outside it;
+//! - the views agree. At most `max_contradicted` of the revolved points
+//!   lie where some view saw through. A triaxial ellipsoid passes the
+//!   first three tests from one side, but its revolved far side pokes
+//!   beyond the silhouettes of its other views.
+//!
+//! The profile's rings, revolved at a spacing of δ, then complete the cloud.
+//! Points within `gap_delta`·δ of a fused point are dropped, and so are the
+//! ones a view saw empty. Like the mirrored completion ([`super::view`]),
+//! they are a shape prior, reported among `points_completed`. The
+//! separability's non-data counts are still never materialised.
+//!
+//! Measured on the 39 sensor-true sequences of `benches/robot_view_eval.sh`
+//! (`sepmem replay`, defaults otherwise), against null:
+//!
+//! - median last-third F 0.734 → 0.840 (mean 0.712 → 0.765);
+//! - volume IoU median 0.836 → 0.915;
+//! - capsules 0.69–0.75 → 0.91–0.99, bottles 0.63–0.69 → 0.82–0.87;
+//! - the worst loss is a turning bowl, −0.03;
+//! - sequences with a frame above 1.3× the true volume: 16 either way.
+//!
+//! Without the ring-ratio and contradiction tests, the bent tubes closed
+//! into tori (5× their volume) and ellipsoids lost 0.05–0.06. Off by
+//! default: on the slowly drifting 20 000-point bowl of `tests/replay.rs`
+//! (model on, no rebuilds) it lifts cold frames more than the warm chain,
+//! and F_cold − F_warm reached 0.043 where that test allows 0.03.
+
+use super::config::RevolutionConfig;
+use super::view::FreeSpace;
+use crate::cloud::Vec3;
+use crate::spatial::KnnIndex;
+use nalgebra::{Matrix6, Vector6};
+use std::f64::consts::TAU;
+
+/// At most this many points (evenly strided) get a normal for the axis fit.
+const AXIS_SAMPLES: usize = 800;
+
+/// Neighbours of a normal's PCA fit.
+const NORMAL_K: usize = 16;
+
+/// A profile ring needs this many points.
+const MIN_RING_POINTS: usize = 3;
+
+/// Ring bins along the axis are this many δ long.
+const RING_BIN_DELTA: f64 = 2.0;
+
+/// A line in space: the axis of revolution.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Axis {
+    /// The axis's point nearest the fit's centre.
+    pub point: Vec3,
+    /// Unit direction.
+    pub dir: Vec3,
+}
+
+impl Axis {
+    /// Height along the axis and distance from it.
+    fn coords(&self, p: &Vec3) -> (f64, f64) {
+        let q = p - self.point;
+        let h = q.dot(&self.dir);
+        (h, (q - self.dir * h).norm())
+    }
+
+    /// |sin ψ| between the unit normal `n` at `p` and the plane through the
+    /// axis and `p` (`None` on the axis).
+    fn tilt(&self, p: &Vec3, n: &Vec3) -> Option<f64> {
+        let q = p - self.point;
+        let radial = q - self.dir * q.dot(&self.dir);
+        let r = radial.norm();
+        (r > 0.0).then(|| (n.dot(&self.dir.cross(&radial)) / r).abs())
+    }
+}
+
+/// The axis whose line complex the normal lines `(n, p × n)` of `points`
+/// best satisfy (module docs); `None` when the fit has no direction (the
+/// normals are all parallel: a plane).
+pub fn fit_axis(points: &[Vec3], normals: &[Vec3]) -> Option<Axis> {
+    let n = points.len().max(1) as f64;
+    let centre = points.iter().sum::<Vec3>() / n;
+    let scale = points
+        .iter()
+        .map(|p| (p - centre).norm())
+        .fold(0.0, f64::max);
+    if scale <= 0.0 {
+        return None;
+    }
+    let mut m = Matrix6::<f64>::zeros();
+    for (p, nrm) in points.iter().zip(normals) {
+        let w = ((p - centre) / scale).cross(nrm);
+        let v = Vector6::new(nrm.x, nrm.y, nrm.z, w.x, w.y, w.z);
+        m += v * v.transpose();
+    }
+    let eig = m.symmetric_eigen();
+    let v = eig.eigenvectors.column(eig.eigenvalues.imin());
+    // v · (n, q × n) = 0 for every normal line meeting the axis (d, a × d):
+    // v = (a × d, d) up to scale.
+    let (moment, dir) = (Vec3::new(v[0], v[1], v[2]), Vec3::new(v[3], v[4], v[5]));
+    let len = dir.norm();
+    (len > 1e-3).then(|| {
+        let dir = dir / len;
+        Axis {
+            point: centre + scale * dir.cross(&(moment / len)),
+            dir,
+        }
+    })
+}
+
+/// Median of `values` (`INFINITY` when empty).
+fn median(mut values: Vec<f64>) -> f64 {
+    if values.is_empty() {
+        return f64::INFINITY;
+    }
+    let mid = values.len() / 2;
+    *values.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+/// The profile `r(h)` of points about an axis: the median distance from
+/// the axis in bins of height.
+#[derive(Debug, Clone)]
+struct Profile {
+    axis: Axis,
+    h0: f64,
+    bin: f64,
+    rings: Vec<Option<f64>>,
+}
+
+impl Profile {
+    fn of(axis: Axis, points: &[Vec3], bin: f64) -> Option<Self> {
+        let coords: Vec<(f64, f64)> = points.iter().map(|p| axis.coords(p)).collect();
+        let (lo, hi) = coords
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), c| {
+                (l.min(c.0), h.max(c.0))
+            });
+        let bins = ((hi - lo) / bin).ceil();
+        if !(1.0..=4096.0).contains(&bins) {
+            return None;
+        }
+        let bins = bins as usize;
+        let mut radii = vec![Vec::new(); bins];
+        for &(h, r) in &coords {
+            radii[Self::index(lo, bin, bins, h)].push(r);
+        }
+        let rings = radii
+            .into_iter()
+            .map(|r| (r.len() >= MIN_RING_POINTS).then(|| median(r)))
+            .collect();
+        Some(Self {
+            axis,
+            h0: lo,
+            bin,
+            rings,
+        })
+    }
+
+    fn index(h0: f64, bin: f64, bins: usize, h: f64) -> usize {
+        (((h - h0) / bin).max(0.0) as usize).min(bins - 1)
+    }
+
+    /// Median distance of `points` to the ring of their height.
+    fn misfit(&self, points: &[Vec3]) -> f64 {
+        let off = points.iter().filter_map(|p| {
+            let (h, r) = self.axis.coords(p);
+            self.rings[Self::index(self.h0, self.bin, self.rings.len(), h)].map(|r0| (r - r0).abs())
+        });
+        median(off.collect())
+    }
+
+    /// The smallest ring over the largest.
+    fn ring_ratio(&self) -> f64 {
+        let rings = self.rings.iter().flatten();
+        let (lo, hi) = rings.fold((f64::INFINITY, 0.0f64), |(l, h), &r| (l.min(r), h.max(r)));
+        lo / hi
+    }
+
+    /// Points on every ring, `step` apart around it.
+    fn revolved(&self, step: f64) -> impl Iterator<Item = Vec3> + '_ {
+        let d = self.axis.dir;
+        let side = if d.x.abs() < 0.9 {
+            Vec3::x()
+        } else {
+            Vec3::y()
+        };
+        let e1 = d.cross(&side).normalize();
+        let e2 = d.cross(&e1);
+        self.rings.iter().enumerate().flat_map(move |(i, ring)| {
+            let centre = self.axis.point + d * (self.h0 + (i as f64 + 0.5) * self.bin);
+            let (r, k) = match ring {
+                Some(r) => (*r, ((TAU * r / step).ceil() as usize).max(8)),
+                None => (0.0, 0),
+            };
+            (0..k).map(move |j| {
+                let t = TAU * j as f64 / k as f64;
+                centre + (e1 * t.cos() + e2 * t.sin()) * r
+            })
+        })
+    }
+}
+
+/// The axis of `points` (normals at an evenly strided sample) and the
+/// median tilt of those normals from it.
+fn axis_of(index: &KnnIndex) -> Option<(Axis, f64)> {
+    let n = index.len();
+    let stride = (n / AXIS_SAMPLES).max(1);
+    let wanted: Vec<bool> = (0..n).map(|i| i % stride == 0).collect();
+    let normals = crate::normals::estimate_normals_where(index, NORMAL_K, &wanted).ok()?;
+    let (pts, nrm): (Vec<Vec3>, Vec<Vec3>) = (0..n)
+        .filter(|&i| wanted[i] && normals[i].norm_squared() > 0.5)
+        .map(|i| (index.points()[i], normals[i]))
+        .unzip();
+    let axis = fit_axis(&pts, &nrm)?;
+    let tilts = pts.iter().zip(&nrm).filter_map(|(p, n)| axis.tilt(p, n));
+    Some((axis, median(tilts.collect())))
+}
+
+/// The revolved completion of the fused `points` (module docs), appended
+/// to them; returns how many were added (0 when the cloud is no surface of
+/// revolution, or its views disagree).
+pub fn complete(
+    free: &dyn FreeSpace,
+    cfg: &RevolutionConfig,
+    delta: f64,
+    points: &mut Vec<Vec3>,
+) -> usize {
+    if points.len() < 2 * NORMAL_K {
+        return 0;
+    }
+    let index = KnnIndex::new(points.clone());
+    let Some((axis, tilt)) = axis_of(&index).filter(|(_, t)| *t <= cfg.max_sin) else {
+        return 0;
+    };
+    let Some(profile) = Profile::of(axis, points, RING_BIN_DELTA * delta) else {
+        return 0;
+    };
+    if profile.misfit(points) > cfg.max_ring_delta * delta
+        || profile.ring_ratio() > cfg.max_ring_ratio
+    {
+        return 0;
+    }
+    let gap2 = (cfg.gap_delta * delta).powi(2);
+    let beyond = profile
+        .revolved(delta)
+        .filter(|q| index.nearest_one(q).0 > gap2);
+    let (seen_free, added): (Vec<Vec3>, Vec<Vec3>) = beyond.partition(|q| free.is_seen_free(q));
+    let total = (seen_free.len() + added.len()).max(1) as f64;
+    let cap = cfg.max_added * points.len() as f64;
+    if seen_free.len() as f64 > cfg.max_contradicted * total || added.len() as f64 > cap {
+        return 0;
+    }
+    tracing::trace!(tilt, added = added.len(), "revolved completion");
+    points.extend_from_slice(&added);
+    added.len()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// No view saw anything empty.
+    struct Unseen;
+
+    impl FreeSpace for Unseen {
+        fn is_seen_free(&self, _: &Vec3) -> bool {
+            false
+        }
+        fn latest_eye(&self) -> Option<Vec3> {
+            None
+        }
+        fn on_latest_surface(&self, _: &Vec3) -> bool {
+            false
+        }
+        fn views_kept(&self) -> usize {
+            1
+        }
+        fn eyes(&self) -> Vec<Vec3> {
+            Vec::new()
+        }
+    }
+
+    /// The back direction of [`half_capsule`]: across `dir`.
+    fn back_of(dir: Vec3) -> Vec3 {
+        let dir = dir.normalize();
+        dir.cross(&dir.cross(&Vec3::x()).normalize())
+    }
+
+    /// The front half (away from [`back_of`]) of a capsule of radius 0.05
+    /// and body length 0.2 along `dir` through `centre`, spaced about 4 mm.
+    fn half_capsule(centre: Vec3, dir: Vec3) -> Vec<Vec3> {
+        let dir = dir.normalize();
+        let e1 = dir.cross(&Vec3::x()).normalize();
+        let e2 = back_of(dir);
+        let (r, half) = (0.05, 0.1);
+        let mut out = Vec::new();
+        for i in 0..=80 {
+            // Arc length along the profile: cap, body, cap.
+            let s = i as f64 / 80.0 * (2.0 * half + std::f64::consts::PI * r);
+            let (h, ring) = if s < std::f64::consts::FRAC_PI_2 * r {
+                let a = s / r;
+                (-half - r * a.cos(), r * a.sin())
+            } else if s < std::f64::consts::FRAC_PI_2 * r + 2.0 * half {
+                (s - std::f64::consts::FRAC_PI_2 * r - half, r)
+            } else {
+                let a = (s - std::f64::consts::FRAC_PI_2 * r - 2.0 * half) / r;
+                (half + r * a.sin(), r * a.cos())
+            };
+            let k = ((std::f64::consts::PI * ring / 0.004).ceil() as usize).max(1);
+            for j in 0..=k {
+                let t = std::f64::consts::PI * j as f64 / k as f64;
+                let p = centre + dir * h + (e1 * t.cos() - e2 * t.sin()) * ring;
+                out.push(p);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn a_half_capsule_is_completed_about_its_axis() {
+        let dir = Vec3::new(0.2, 0.3, 1.0).normalize();
+        let centre = Vec3::new(0.1, -0.2, 0.8);
+        let mut points = half_capsule(centre, dir);
+        let n = points.len();
+        let index = KnnIndex::new(points.clone());
+        let (axis, tilt) = axis_of(&index).expect("an axis");
+        assert!(axis.dir.dot(&dir).abs() > 0.999, "{:?}", axis.dir);
+        let off = (axis.point - centre).cross(&dir).norm();
+        assert!(off < 2e-3, "axis {off} m off the centre line");
+        assert!(tilt < 0.05, "tilt {tilt}");
+        let cfg = RevolutionConfig::default();
+        let added = complete(&Unseen, &cfg, 0.004, &mut points);
+        assert!(added > n / 3, "{added} of {n}");
+        // The added points lie on the capsule's surface (within a ring
+        // bin's slope at the poles): 0.05 from its centre segment.
+        for q in &points[n..] {
+            let h = (q - centre).dot(&dir).clamp(-0.1, 0.1);
+            let off = ((q - centre - dir * h).norm() - 0.05).abs();
+            assert!(off < 0.003, "{q:?} is {off} m off the surface");
+        }
+        // ... on its back half: the side the points did not cover.
+        let back = points[n..]
+            .iter()
+            .filter(|q| (*q - centre).dot(&back_of(dir)) > 0.0);
+        assert!(back.count() > (points.len() - n) * 9 / 10);
+    }
+
+    #[test]
+    fn a_box_corner_and_a_torus_arc_are_not_completed() {
+        let cfg = RevolutionConfig::default();
+        // Three faces of a box.
+        let mut corner = Vec::new();
+        for i in 0..40 {
+            for j in 0..40 {
+                let (a, b) = (i as f64 * 0.004, j as f64 * 0.004);
+                corner.push(Vec3::new(a, b, 0.0));
+                corner.push(Vec3::new(a, 0.0, b));
+                corner.push(Vec3::new(0.0, a, b));
+            }
+        }
+        assert_eq!(complete(&Unseen, &cfg, 0.004, &mut corner), 0);
+        // A quarter of a torus (a bent tube): its axis lies outside it.
+        let mut arc = Vec::new();
+        for i in 0..=60 {
+            let u = std::f64::consts::FRAC_PI_2 * i as f64 / 60.0;
+            for j in 0..40 {
+                let v = TAU * j as f64 / 40.0;
+                let ring = 0.15 + 0.03 * v.cos();
+                arc.push(Vec3::new(ring * u.cos(), ring * u.sin(), 0.03 * v.sin()));
+            }
+        }
+        assert_eq!(complete(&Unseen, &cfg, 0.004, &mut arc), 0);
+    }
+
+    #[test]
+    fn revolved_points_that_views_saw_through_reject_the_completion() {
+        /// Everything behind the front half is seen empty.
+        struct FrontOnly(Vec3, Vec3);
+        impl FreeSpace for FrontOnly {
+            fn is_seen_free(&self, p: &Vec3) -> bool {
+                (p - self.0).dot(&self.1) > 0.0
+            }
+            fn latest_eye(&self) -> Option<Vec3> {
+                None
+            }
+            fn on_latest_surface(&self, _: &Vec3) -> bool {
+                false
+            }
+            fn views_kept(&self) -> usize {
+                1
+            }
+            fn eyes(&self) -> Vec<Vec3> {
+                Vec::new()
+            }
+        }
+        let (centre, dir) = (Vec3::new(0.0, 0.0, 0.8), Vec3::z());
+        let mut points = half_capsule(centre, dir);
+        assert!(points.iter().all(|p| p.iter().all(|c| c.is_finite())));
+        let cfg = RevolutionConfig::default();
+        let free = FrontOnly(centre, back_of(dir));
+        assert_eq!(complete(&free, &cfg, 0.004, &mut points), 0);
+        // Without that evidence it would have been completed.
+        assert!(complete(&Unseen, &cfg, 0.004, &mut points) > 0);
+    }
+}
