@@ -72,6 +72,19 @@ fn thin_key(salt: u64) -> impl Fn(usize) -> u64 {
 /// 3-vector of `f64` used for every position and direction in sepmem.
 pub type Vec3 = Vector3<f64>;
 
+/// Two unit vectors that make a right-handed orthonormal frame with the
+/// unit vector `dir`: `u = dir × h` (normalised, `h` the x axis unless
+/// `dir` is near it, then the y axis) and `w = dir × u`.
+pub fn perpendicular_pair(dir: &Vec3) -> (Vec3, Vec3) {
+    let helper = if dir.x.abs() < 0.9 {
+        Vec3::x()
+    } else {
+        Vec3::y()
+    };
+    let u = dir.cross(&helper).normalize();
+    (u, dir.cross(&u))
+}
+
 /// Errors about the content of a point cloud.
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum CloudError {

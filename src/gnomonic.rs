@@ -25,13 +25,7 @@ impl ViewFrame {
     /// The frame at `eye` looking at `target`; `None` when they coincide.
     pub fn looking_at(eye: Vec3, target: Vec3) -> Option<Self> {
         let dir = (target - eye).try_normalize(1e-12)?;
-        let helper = if dir.x.abs() < 0.9 {
-            Vec3::x()
-        } else {
-            Vec3::y()
-        };
-        let u = dir.cross(&helper).normalize();
-        let w = dir.cross(&u);
+        let (u, w) = crate::cloud::perpendicular_pair(&dir);
         Some(Self { eye, dir, u, w })
     }
 

@@ -199,13 +199,7 @@ impl Profile {
     /// Points on every ring, `step` apart around it.
     fn revolved(&self, step: f64) -> impl Iterator<Item = Vec3> + '_ {
         let d = self.axis.dir;
-        let side = if d.x.abs() < 0.9 {
-            Vec3::x()
-        } else {
-            Vec3::y()
-        };
-        let e1 = d.cross(&side).normalize();
-        let e2 = d.cross(&e1);
+        let (e1, e2) = crate::cloud::perpendicular_pair(&d);
         self.rings.iter().enumerate().flat_map(move |(i, ring)| {
             let centre = self.axis.point + d * (self.h0 + (i as f64 + 0.5) * self.bin);
             let (r, k) = match ring {
@@ -279,12 +273,16 @@ pub fn complete(
 mod tests {
     use super::*;
 
-    /// No view saw anything empty.
-    struct Unseen;
+    /// Views that saw empty everything beyond the plane through the point
+    /// `.0` across the direction `.1`; `None`: nothing.
+    struct SeenBeyond(Option<(Vec3, Vec3)>);
 
-    impl FreeSpace for Unseen {
-        fn is_seen_free(&self, _: &Vec3) -> bool {
-            false
+    /// No view saw anything empty.
+    const UNSEEN: SeenBeyond = SeenBeyond(None);
+
+    impl FreeSpace for SeenBeyond {
+        fn is_seen_free(&self, p: &Vec3) -> bool {
+            self.0.is_some_and(|(at, dir)| (p - at).dot(&dir) > 0.0)
         }
         fn latest_eye(&self) -> Option<Vec3> {
             None
@@ -349,7 +347,7 @@ mod tests {
         assert!(off < 2e-3, "axis {off} m off the centre line");
         assert!(tilt < 0.05, "tilt {tilt}");
         let cfg = RevolutionConfig::default();
-        let added = complete(&Unseen, &cfg, 0.004, &mut points);
+        let added = complete(&UNSEEN, &cfg, 0.004, &mut points);
         assert!(added > n / 3, "{added} of {n}");
         // The added points lie on the capsule's surface (within a ring
         // bin's slope at the poles): 0.05 from its centre segment.
@@ -378,7 +376,7 @@ mod tests {
                 corner.push(Vec3::new(0.0, a, b));
             }
         }
-        assert_eq!(complete(&Unseen, &cfg, 0.004, &mut corner), 0);
+        assert_eq!(complete(&UNSEEN, &cfg, 0.004, &mut corner), 0);
         // A quarter of a torus (a bent tube): its axis lies outside it.
         let mut arc = Vec::new();
         for i in 0..=60 {
@@ -389,37 +387,18 @@ mod tests {
                 arc.push(Vec3::new(ring * u.cos(), ring * u.sin(), 0.03 * v.sin()));
             }
         }
-        assert_eq!(complete(&Unseen, &cfg, 0.004, &mut arc), 0);
+        assert_eq!(complete(&UNSEEN, &cfg, 0.004, &mut arc), 0);
     }
 
     #[test]
     fn revolved_points_that_views_saw_through_reject_the_completion() {
-        /// Everything behind the front half is seen empty.
-        struct FrontOnly(Vec3, Vec3);
-        impl FreeSpace for FrontOnly {
-            fn is_seen_free(&self, p: &Vec3) -> bool {
-                (p - self.0).dot(&self.1) > 0.0
-            }
-            fn latest_eye(&self) -> Option<Vec3> {
-                None
-            }
-            fn on_latest_surface(&self, _: &Vec3) -> bool {
-                false
-            }
-            fn views_kept(&self) -> usize {
-                1
-            }
-            fn eyes(&self) -> Vec<Vec3> {
-                Vec::new()
-            }
-        }
         let (centre, dir) = (Vec3::new(0.0, 0.0, 0.8), Vec3::z());
         let mut points = half_capsule(centre, dir);
         assert!(points.iter().all(|p| p.iter().all(|c| c.is_finite())));
         let cfg = RevolutionConfig::default();
-        let free = FrontOnly(centre, back_of(dir));
+        let free = SeenBeyond(Some((centre, back_of(dir))));
         assert_eq!(complete(&free, &cfg, 0.004, &mut points), 0);
         // Without that evidence it would have been completed.
-        assert!(complete(&Unseen, &cfg, 0.004, &mut points) > 0);
+        assert!(complete(&UNSEEN, &cfg, 0.004, &mut points) > 0);
     }
 }
