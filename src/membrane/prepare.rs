@@ -269,17 +269,10 @@ pub(crate) fn prepare<'a>(
         vec![delta; points.len()]
     };
     let mut points = points;
-    let revolved = match (view.as_ref(), free, &cfg.view.revolution) {
-        (None, Some(f), Some(rc)) => super::revolution::complete(f, rc, delta, &mut points),
-        _ => 0,
+    let completed = match (view.as_mut(), free) {
+        (None, Some(f)) => complete_fused_cloud(cfg, f, delta, &mut points, &mut d_used),
+        (view, _) => complete_view(cfg, view, &mut points, &mut d_used),
     };
-    d_used.resize(points.len(), delta);
-    let completed = revolved
-        + match (view.as_mut(), free, &cfg.view.fused_completion) {
-            (None, Some(_), _) if revolved > 0 => 0,
-            (None, Some(f), Some(fc)) => complete_fused(f, fc, delta, &mut points, &mut d_used),
-            (view, ..) => complete_view(cfg, view, &mut points, &mut d_used),
-        };
     let spacing = p
         .local_spacing
         .as_ref()
@@ -354,6 +347,29 @@ fn complete_view(
         d_used.push(d_used[i]);
     }
     added
+}
+
+/// The completion of a fused cloud: revolved (`view.revolution`) when it is
+/// a surface of revolution, else mirrored (`view.fused_completion`); each
+/// added point takes δ, or its mirror source's d_i. Returns how many were
+/// added.
+fn complete_fused_cloud(
+    cfg: &MembraneConfig,
+    free: &dyn view::FreeSpace,
+    delta: f64,
+    points: &mut Vec<Vec3>,
+    d_used: &mut Vec<f64>,
+) -> usize {
+    let revolved = cfg
+        .view
+        .revolution
+        .as_ref()
+        .map_or(0, |rc| super::revolution::complete(free, rc, delta, points));
+    d_used.resize(points.len(), delta);
+    match &cfg.view.fused_completion {
+        Some(fc) if revolved == 0 => complete_fused(free, fc, delta, points, d_used),
+        _ => revolved,
+    }
 }
 
 /// The mirrored completion of a fused cloud (`view.fused_completion`,

@@ -133,11 +133,10 @@ pub fn fit_axis(points: &[Vec3], normals: &[Vec3]) -> Option<Axis> {
     })
 }
 
-/// Median of `values` (`INFINITY` when empty).
-fn median(mut values: Vec<f64>) -> f64 {
-    if values.is_empty() {
-        return f64::INFINITY;
-    }
+/// The upper median of non-empty `values` (the upper one of the middle
+/// pair). Not [`crate::density::median_of`], which averages the middle
+/// pair: with it the 39 sequences' median last-third F read 0.807, not 0.840.
+fn upper_median(values: &mut [f64]) -> f64 {
     let mid = values.len() / 2;
     *values.select_nth_unstable_by(mid, f64::total_cmp).1
 }
@@ -171,7 +170,7 @@ impl Profile {
         }
         let rings = radii
             .into_iter()
-            .map(|r| (r.len() >= MIN_RING_POINTS).then(|| median(r)))
+            .map(|mut r| (r.len() >= MIN_RING_POINTS).then(|| upper_median(&mut r)))
             .collect();
         Some(Self {
             axis,
@@ -185,13 +184,22 @@ impl Profile {
         (((h - h0) / bin).max(0.0) as usize).min(bins - 1)
     }
 
-    /// Median distance of `points` to the ring of their height.
+    /// Median distance of `points` to the ring of their height (`INFINITY`
+    /// when no point has a ring).
     fn misfit(&self, points: &[Vec3]) -> f64 {
-        let off = points.iter().filter_map(|p| {
-            let (h, r) = self.axis.coords(p);
-            self.rings[Self::index(self.h0, self.bin, self.rings.len(), h)].map(|r0| (r - r0).abs())
-        });
-        median(off.collect())
+        let mut off: Vec<f64> = points
+            .iter()
+            .filter_map(|p| {
+                let (h, r) = self.axis.coords(p);
+                let ring = self.rings[Self::index(self.h0, self.bin, self.rings.len(), h)];
+                ring.map(|r0| (r - r0).abs())
+            })
+            .collect();
+        if off.is_empty() {
+            f64::INFINITY
+        } else {
+            upper_median(&mut off)
+        }
     }
 
     /// The smallest ring over the largest.
@@ -205,17 +213,17 @@ impl Profile {
     fn revolved(&self, step: f64) -> impl Iterator<Item = Vec3> + '_ {
         let d = self.axis.dir;
         let (e1, e2) = crate::cloud::perpendicular_pair(&d);
-        self.rings.iter().enumerate().flat_map(move |(i, ring)| {
-            let centre = self.axis.point + d * (self.h0 + (i as f64 + 0.5) * self.bin);
-            let (r, k) = match ring {
-                Some(r) => (*r, ((TAU * r / step).ceil() as usize).max(8)),
-                None => (0.0, 0),
-            };
-            (0..k).map(move |j| {
-                let t = TAU * j as f64 / k as f64;
-                centre + (e1 * t.cos() + e2 * t.sin()) * r
+        let rings = self.rings.iter().enumerate();
+        rings
+            .filter_map(|(i, ring)| ring.map(|r| (i, r)))
+            .flat_map(move |(i, r)| {
+                let centre = self.axis.point + d * (self.h0 + (i as f64 + 0.5) * self.bin);
+                let k = ((TAU * r / step).ceil() as usize).max(8);
+                (0..k).map(move |j| {
+                    let t = TAU * j as f64 / k as f64;
+                    centre + (e1 * t.cos() + e2 * t.sin()) * r
+                })
             })
-        })
     }
 }
 
@@ -231,8 +239,12 @@ fn axis_of(index: &KnnIndex) -> Option<(Axis, f64)> {
         .map(|i| (index.points()[i], normals[i]))
         .unzip();
     let axis = fit_axis(&pts, &nrm)?;
-    let tilts = pts.iter().zip(&nrm).filter_map(|(p, n)| axis.tilt(p, n));
-    Some((axis, median(tilts.collect())))
+    let mut tilts: Vec<f64> = pts
+        .iter()
+        .zip(&nrm)
+        .filter_map(|(p, n)| axis.tilt(p, n))
+        .collect();
+    (!tilts.is_empty()).then(|| (axis, upper_median(&mut tilts)))
 }
 
 /// The revolved completion of the fused `points` (module docs), appended
