@@ -571,6 +571,10 @@ pub struct RevolutionConfig {
     /// Largest median |sin ψ| between a normal and the plane through the
     /// axis (0 on a surface of revolution).
     pub max_sin: f64,
+    /// Least determinacy of the axis (the line complex's second smallest
+    /// eigenvalue over its smallest): a sphere's normal lines fit every
+    /// axis through its centre.
+    pub min_determinacy: f64,
     /// Largest median distance of a point to its ring, in δ.
     pub max_ring_delta: f64,
     /// The smallest ring is at most this share of the largest: the axis
@@ -588,6 +592,7 @@ impl Default for RevolutionConfig {
     fn default() -> Self {
         Self {
             max_sin: 0.1,
+            min_determinacy: 15.0,
             max_ring_delta: 1.5,
             max_ring_ratio: 0.7,
             max_contradicted: 0.1,
@@ -640,7 +645,7 @@ impl Default for ViewConfig {
             completion: Completion::None,
             back: None,
             fused_completion: None,
-            revolution: None,
+            revolution: Some(RevolutionConfig::default()),
         }
     }
 }
@@ -736,6 +741,7 @@ fn validate_revolution(r: Option<&RevolutionConfig>) -> Result<(), ConfigError> 
         check((0.0..=1.0).contains(&v), key, "must lie in [0, 1]")?;
     }
     let positive = [
+        (r.min_determinacy, "view.revolution.min_determinacy"),
         (r.max_ring_delta, "view.revolution.max_ring_delta"),
         (r.gap_delta, "view.revolution.gap_delta"),
         (r.max_added, "view.revolution.max_added"),
