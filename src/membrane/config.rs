@@ -586,6 +586,9 @@ pub struct RevolutionConfig {
     pub gap_delta: f64,
     /// At most this many revolved points per fused point.
     pub max_added: f64,
+    /// Beyond the revolved solid by more than this many δ, the inward
+    /// force may carve, as where a view saw empty; `None`: only there.
+    pub carve_delta: Option<f64>,
 }
 
 impl Default for RevolutionConfig {
@@ -598,6 +601,7 @@ impl Default for RevolutionConfig {
             max_contradicted: 0.1,
             gap_delta: 3.0,
             max_added: 1.5,
+            carve_delta: Some(4.0),
         }
     }
 }
@@ -749,7 +753,11 @@ fn validate_revolution(r: Option<&RevolutionConfig>) -> Result<(), ConfigError> 
     for (v, key) in positive {
         check(pos(v), key, "must be positive")?;
     }
-    Ok(())
+    check(
+        r.carve_delta.is_none_or(|m| m >= 0.0 && m.is_finite()),
+        "view.revolution.carve_delta",
+        "must be finite and at least 0 (null: no carving beyond the solid)",
+    )
 }
 
 fn validate_prepare(p: &PrepareConfig) -> Result<(), ConfigError> {

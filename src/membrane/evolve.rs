@@ -101,7 +101,7 @@ pub(crate) fn evolve(
     let t_init = Instant::now();
     let (mut surface, pole_axis) =
         init::initial(&prep.points, &cfg.init, warm, prep.eye(), pole, fits)?;
-    if let (Some(_), Some(e), Seen::Views(_)) = (warm, &cfg.init.warm_enclose, prep.seen()) {
+    if let (Some(_), Some(e), Seen::Views(..)) = (warm, &cfg.init.warm_enclose, prep.seen()) {
         let fit = fits.get(surface.m(), surface.l())?;
         let (margin, pad) = (e.margin_delta * prep.delta, e.pad_delta * prep.delta);
         enclose::enclose(&mut surface, fit, &prep.points, margin, pad)?;

@@ -69,6 +69,8 @@ pub(crate) struct Prepared<'a> {
     pub(crate) view: Option<view::ViewBuffer>,
     /// The free space of the views a fused cloud was made from.
     pub(crate) free: Option<&'a dyn view::FreeSpace>,
+    /// The solid of revolution the fused cloud was completed to.
+    pub(crate) solid: Option<super::revolution::Solid>,
     pub(crate) index: SpatialIndex,
     pub(crate) attributes: Option<AttributeSet>,
     pub(crate) outside: Option<OutsideGrid>,
@@ -89,7 +91,7 @@ pub(crate) struct PointCounts {
 impl Prepared<'_> {
     /// What the cameras saw around the used points.
     pub(crate) fn seen(&self) -> Seen<'_> {
-        Seen::of(self.view.as_ref(), self.free)
+        Seen::of(self.view.as_ref(), self.free, self.solid.as_ref())
     }
 
     /// The camera of a partial cloud: the single view's, or the latest
@@ -269,9 +271,9 @@ pub(crate) fn prepare<'a>(
         vec![delta; points.len()]
     };
     let mut points = points;
-    let completed = match (view.as_mut(), free) {
+    let (completed, solid) = match (view.as_mut(), free) {
         (None, Some(f)) => complete_fused_cloud(cfg, f, delta, &mut points, &mut d_used),
-        (view, _) => complete_view(cfg, view, &mut points, &mut d_used),
+        (view, _) => (complete_view(cfg, view, &mut points, &mut d_used), None),
     };
     let spacing = p
         .local_spacing
@@ -288,7 +290,7 @@ pub(crate) fn prepare<'a>(
     let order_free =
         attributes.is_none() && spacing.is_none() && p.search_delta == SearchDelta::Global;
     let index = search_grid(&points, order_free, delta)?;
-    let seen = Seen::of(view.as_ref(), free);
+    let seen = Seen::of(view.as_ref(), free, solid.as_ref());
     let outside = outside_grid(cfg, &points, spacing.as_deref(), delta, seen);
     Ok(Prepared {
         counts: PointCounts {
@@ -306,6 +308,7 @@ pub(crate) fn prepare<'a>(
         scale,
         view,
         free,
+        solid,
         index,
         attributes,
         outside,
@@ -352,23 +355,27 @@ fn complete_view(
 /// The completion of a fused cloud: revolved (`view.revolution`) when it is
 /// a surface of revolution, else mirrored (`view.fused_completion`); each
 /// added point takes δ, or its mirror source's d_i. Returns how many were
-/// added.
+/// added, and the solid of revolution that bounds the carving.
 fn complete_fused_cloud(
     cfg: &MembraneConfig,
     free: &dyn view::FreeSpace,
     delta: f64,
     points: &mut Vec<Vec3>,
     d_used: &mut Vec<f64>,
-) -> usize {
+) -> (usize, Option<super::revolution::Solid>) {
     let revolved = cfg
         .view
         .revolution
         .as_ref()
-        .map_or(0, |rc| super::revolution::complete(free, rc, delta, points));
+        .and_then(|rc| super::revolution::complete(free, rc, delta, points));
     d_used.resize(points.len(), delta);
-    match &cfg.view.fused_completion {
-        Some(fc) if revolved == 0 => complete_fused(free, fc, delta, points, d_used),
-        _ => revolved,
+    match (&cfg.view.fused_completion, revolved) {
+        (_, Some(r)) if r.added > 0 => (r.added, r.solid),
+        (Some(fc), r) => (
+            complete_fused(free, fc, delta, points, d_used),
+            r.and_then(|r| r.solid),
+        ),
+        (None, r) => (0, r.and_then(|r| r.solid)),
     }
 }
 

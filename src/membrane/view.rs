@@ -330,17 +330,22 @@ pub enum Seen<'a> {
     AllAround,
     /// The cloud is one depth view.
     View(&'a ViewBuffer),
-    /// A fused cloud, with the free space of the views it was made from.
-    Views(&'a dyn FreeSpace),
+    /// A fused cloud, with the free space of the views it was made from,
+    /// and the solid of revolution it was completed to.
+    Views(&'a dyn FreeSpace, Option<&'a super::revolution::Solid>),
 }
 
 impl<'a> Seen<'a> {
     /// A single view when there is one, else the fused views' free space
     /// when given, else nothing.
-    pub fn of(view: Option<&'a ViewBuffer>, free: Option<&'a dyn FreeSpace>) -> Self {
+    pub fn of(
+        view: Option<&'a ViewBuffer>,
+        free: Option<&'a dyn FreeSpace>,
+        solid: Option<&'a super::revolution::Solid>,
+    ) -> Self {
         match (view, free) {
             (Some(vb), _) => Self::View(vb),
-            (None, Some(f)) => Self::Views(f),
+            (None, Some(f)) => Self::Views(f, solid),
             (None, None) => Self::AllAround,
         }
     }
@@ -350,18 +355,19 @@ impl<'a> Seen<'a> {
     pub fn fused_eyes(&self) -> Vec<Vec3> {
         match self {
             Self::AllAround | Self::View(_) => Vec::new(),
-            Self::Views(f) => f.eyes(),
+            Self::Views(f, _) => f.eyes(),
         }
     }
 
     /// Whether the inward force may take `p` for outside: anywhere without
     /// a view; with one, only where it was seen empty or lies beyond the
-    /// completion's back; with fused views, only where one saw it empty.
+    /// completion's back; with fused views, only where one saw it empty or
+    /// beyond the solid of revolution they were completed to.
     pub fn may_be_outside(&self, p: &Vec3) -> bool {
         match self {
             Self::AllAround => true,
             Self::View(vb) => vb.is_seen_free(p) || vb.is_beyond_back(p),
-            Self::Views(f) => f.is_seen_free(p),
+            Self::Views(f, solid) => f.is_seen_free(p) || solid.is_some_and(|s| s.is_beyond(p)),
         }
     }
 }
@@ -513,8 +519,8 @@ mod tests {
             }
         }
         let views = Views(&vb);
-        assert!(!outside_at(&grid, Seen::Views(&views), &back));
-        assert!(outside_at(&grid, Seen::Views(&views), &front));
+        assert!(!outside_at(&grid, Seen::Views(&views, None), &back));
+        assert!(outside_at(&grid, Seen::Views(&views, None), &front));
     }
 
     #[test]
