@@ -64,8 +64,8 @@
 //! sequences above 1.5× the true volume 11 → 7 (above 1.3×: 16 → 15); the
 //! share of visible points more than 3σ outside the mesh unchanged (median
 //! 0.0057 → 0.0056). With `carve_delta` 2 and the bin with its two
-//! neighbours only, the bottles' necks folded in (that share 0.4 % → 3 %
-//! on the orbited bottle).
+//! neighbours only, the bottles' necks folded in (that share 0.37 % →
+//! 2.6 % on the orbited bottle).
 //!
 //! The determinacy there: 27–170 on capsules and bottles, 29–46 on tori,
 //! 1.4–10 on balls and bowls. Without its test, the slowly drifting
