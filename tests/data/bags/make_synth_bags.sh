@@ -16,8 +16,8 @@ D=tests/data/bags
 #     default 640×480, f = 525 camera at 1 m, Kinect noise, no outliers.
 "$SEPMEM" synth -o "$D/synth_turn_mug.mcap" --shapes mug --motion turn --degrees 180 \
     --frames 30 --distance 1.0 --noise kinect --outliers 0 --mesh-res 48 --seed 4 --quiet
-# (d) the robot's view (issue 20): the issue's shapes turning 180° in place over
-#     30 frames (6° per frame), one orbited by the camera, and three swapped on
+# (d) the robot's view (issue 20): the issue's shapes and a bottle turning 180° in
+#     place over 30 frames (6° per frame), one orbited by the camera, and three swapped on
 #     one stream; a 480×360, f = 393.75 camera (the default's field of view at
 #     0.56× its points, to keep the bags small) at 1 m, Kinect noise, no outliers.
 #     The YCB banana is read from the shared datasets (LGPL-2.1, see README).
@@ -25,7 +25,7 @@ YCB=${YCB:-../shared/datasets/meshes_ground_truth/ycb_video_simplified}
 R="$D/robot_view"
 mkdir -p "$R"
 CAM="--width 480 --height 360 --focal 393.75 --distance 1.0 --noise kinect --outliers 0 --frames 30 --degrees 180"
-for shape in capsule rounded_box bent_tube; do
+for shape in capsule rounded_box bent_tube bottle; do
     "$SEPMEM" synth -o "$R/turn_$shape.mcap" --shapes $shape --motion turn $CAM --mesh-res 32 --seed 4 --quiet
 done
 "$SEPMEM" synth -o "$R/turn_ycb_banana.mcap" --shapes "$YCB/YcbBanana.obj" --motion turn $CAM --seed 4 --quiet
