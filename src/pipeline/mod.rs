@@ -500,6 +500,25 @@ fn alignment_model(mesh: &TriMesh) -> (Vec<Vec3>, Vec<Vec3>) {
     }
 }
 
+/// What a rebuild must fit to be adopted (`pipeline.rebuild.max_misfit`).
+#[derive(Debug, Clone, Copy)]
+struct Fit<'a> {
+    /// The frame's points.
+    points: &'a [Vec3],
+    /// The largest distance a point's misfit counts.
+    trim: f64,
+    /// The largest ratio of the rebuild's misfit to the warm start's.
+    max: f64,
+}
+
+impl Fit<'_> {
+    /// Whether `rebuilt` fits the frame well enough to replace `warm`.
+    fn prefers(&self, rebuilt: &ClosedSurface, warm: &ClosedSurface) -> bool {
+        let misfit = |s| rebuild::misfit(s, self.points, self.trim);
+        misfit(rebuilt) <= self.max * misfit(warm)
+    }
+}
+
 /// Fewest on-data vertices for [`alignment_model`] to use them alone.
 const MIN_ALIGN_VERTICES: usize = 50;
 
@@ -656,7 +675,16 @@ impl Tracker {
         let fused = self.fuse(raw, path, motion, size, cfg);
         let mut rebuild_wait = Duration::ZERO;
         if let Some(w) = warm.as_mut() {
-            let (adopted, waited) = self.adopt_rebuild(w, frame, deadline.is_none());
+            let fit = cfg
+                .rebuild
+                .as_ref()
+                .and_then(|r| r.max_misfit)
+                .map(|max| Fit {
+                    points: &cloud.points,
+                    trim: cfg.icp_trim * size,
+                    max: max.get(),
+                });
+            let (adopted, waited) = self.adopt_rebuild(w, frame, deadline.is_none(), fit);
             rebuild_wait = waited;
             if let Some(age) = adopted {
                 reason = PathReason::Rebuilt { age };
@@ -838,12 +866,14 @@ impl Tracker {
     /// Start the warm frame `warm` from the stream's background rebuild
     /// (`pipeline.rebuild`) when one may be adopted at `frame` (waiting
     /// for it when `wait`), moved into this frame by the tracked pose, and
-    /// return how many frames ago it started, and how long the frame waited.
+    /// when it `fit`s the frame; return how many frames ago it started, and
+    /// how long the frame waited. A rebuild that does not fit is dropped.
     fn adopt_rebuild(
         &mut self,
         warm: &mut WarmStart,
         frame: u64,
         wait: bool,
+        fit: Option<Fit<'_>>,
     ) -> (Option<u64>, Duration) {
         let (Some(pending), Some(fused)) = (self.rebuild.as_ref(), self.fused.as_ref()) else {
             return (None, Duration::ZERO);
@@ -858,7 +888,8 @@ impl Tracker {
         };
         let age = frame.saturating_sub(pending.started());
         self.rebuild = None;
-        let Some(surface) = surface else {
+        let Some(surface) = surface.filter(|s| fit.is_none_or(|f| f.prefers(s, &warm.surface)))
+        else {
             return (None, waited);
         };
         warm.surface = surface;
