@@ -244,35 +244,57 @@ impl Default for ModelIcpConfig {
     }
 }
 
-/// A share in (0, 1], checked when the configuration is parsed.
-#[derive(Debug, Clone, Copy, PartialEq, PartialOrd, Serialize, Deserialize)]
-#[serde(try_from = "f64", into = "f64")]
-pub struct Share(f64);
+/// A configuration number checked when the configuration is parsed: a
+/// newtype of `f64` that deserialises only from a value `$ok` accepts, and
+/// says what it is not otherwise.
+macro_rules! checked_f64 {
+    ($(#[$doc:meta])* $name:ident, $ok:expr, $what:literal) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, Copy, PartialEq, PartialOrd, Serialize, Deserialize)]
+        #[serde(try_from = "f64", into = "f64")]
+        pub struct $name(f64);
 
-impl Share {
-    /// The share.
-    pub fn get(self) -> f64 {
-        self.0
-    }
-}
-
-impl TryFrom<f64> for Share {
-    type Error = String;
-
-    fn try_from(v: f64) -> Result<Self, Self::Error> {
-        if v > 0.0 && v <= 1.0 {
-            Ok(Self(v))
-        } else {
-            Err(format!("{v} is not a share in (0, 1]"))
+        impl $name {
+            /// The value.
+            pub fn get(self) -> f64 {
+                self.0
+            }
         }
-    }
+
+        impl TryFrom<f64> for $name {
+            type Error = String;
+
+            fn try_from(v: f64) -> Result<Self, Self::Error> {
+                let ok: fn(f64) -> bool = $ok;
+                if ok(v) {
+                    Ok(Self(v))
+                } else {
+                    Err(format!("{v} is not {}", $what))
+                }
+            }
+        }
+
+        impl From<$name> for f64 {
+            fn from(s: $name) -> Self {
+                s.0
+            }
+        }
+    };
 }
 
-impl From<Share> for f64 {
-    fn from(s: Share) -> Self {
-        s.0
-    }
-}
+checked_f64!(
+    /// A share in (0, 1], checked when the configuration is parsed.
+    Share,
+    |v| v > 0.0 && v <= 1.0,
+    "a share in (0, 1]"
+);
+
+checked_f64!(
+    /// A positive, finite factor, checked when the configuration is parsed.
+    Factor,
+    |v| v > 0.0 && v.is_finite(),
+    "a positive, finite factor"
+);
 
 /// Errors of one frame of one stream.
 #[derive(Debug, Error)]

@@ -54,6 +54,7 @@ use crate::membrane::view::FreeSpace;
 use crate::membrane::{Budget, ConfigError, Membrane, Start};
 use crate::model::ObjectModel;
 use crate::pipeline::align::Rigid;
+use crate::pipeline::Factor;
 use crate::spatial::KnnIndex;
 use crate::spline::ClosedSurface;
 use crate::spline::Layout;
@@ -76,36 +77,6 @@ pub struct RebuildConfig {
     /// many times the warm start's is not adopted; `None`: always adopted.
     #[serde(default)]
     pub max_misfit: Option<Factor>,
-}
-
-/// A positive, finite factor, checked when the configuration is parsed.
-#[derive(Debug, Clone, Copy, PartialEq, PartialOrd, Serialize, Deserialize)]
-#[serde(try_from = "f64", into = "f64")]
-pub struct Factor(f64);
-
-impl Factor {
-    /// The factor.
-    pub fn get(self) -> f64 {
-        self.0
-    }
-}
-
-impl TryFrom<f64> for Factor {
-    type Error = String;
-
-    fn try_from(v: f64) -> Result<Self, Self::Error> {
-        if v > 0.0 && v.is_finite() {
-            Ok(Self(v))
-        } else {
-            Err(format!("{v} is not a positive, finite factor"))
-        }
-    }
-}
-
-impl From<Factor> for f64 {
-    fn from(f: Factor) -> Self {
-        f.0
-    }
 }
 
 impl Default for RebuildConfig {
