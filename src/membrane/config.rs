@@ -599,7 +599,7 @@ impl Default for RevolutionConfig {
             max_ring_delta: 1.5,
             max_ring_ratio: 0.7,
             max_contradicted: 0.1,
-            gap_delta: 3.0,
+            gap_delta: 1.5,
             max_added: 1.5,
             carve_delta: Some(4.0),
         }
