@@ -369,14 +369,13 @@ fn complete_fused_cloud(
         .as_ref()
         .and_then(|rc| super::revolution::complete(free, rc, delta, points));
     d_used.resize(points.len(), delta);
-    match (&cfg.view.fused_completion, revolved) {
-        (_, Some(r)) if r.added > 0 => (r.added, r.solid),
-        (Some(fc), r) => (
-            complete_fused(free, fc, delta, points, d_used),
-            r.and_then(|r| r.solid),
-        ),
-        (None, r) => (0, r.and_then(|r| r.solid)),
-    }
+    let added = revolved.as_ref().map_or(0, |r| r.added);
+    let solid = revolved.and_then(|r| r.solid);
+    let added = match &cfg.view.fused_completion {
+        Some(fc) if added == 0 => complete_fused(free, fc, delta, points, d_used),
+        _ => added,
+    };
+    (added, solid)
 }
 
 /// The mirrored completion of a fused cloud (`view.fused_completion`,

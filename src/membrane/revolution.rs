@@ -401,13 +401,19 @@ pub fn complete(
         return None;
     }
     let gap2 = (cfg.gap_delta * delta).powi(2);
-    let beyond = profile
+    let mut seen_free = 0usize;
+    let added: Vec<Vec3> = profile
         .revolved(delta)
-        .filter(|q| index.nearest_one(q).0 > gap2);
-    let (seen_free, added): (Vec<Vec3>, Vec<Vec3>) = beyond.partition(|q| free.is_seen_free(q));
-    let total = (seen_free.len() + added.len()).max(1) as f64;
+        .filter(|q| index.nearest_one(q).0 > gap2)
+        .filter(|q| {
+            let free = free.is_seen_free(q);
+            seen_free += usize::from(free);
+            !free
+        })
+        .collect();
+    let total = (seen_free + added.len()).max(1) as f64;
     let cap = cfg.max_added * points.len() as f64;
-    if seen_free.len() as f64 > cfg.max_contradicted * total || added.len() as f64 > cap {
+    if seen_free as f64 > cfg.max_contradicted * total || added.len() as f64 > cap {
         return None;
     }
     tracing::trace!(tilt, added = added.len(), "revolved completion");
