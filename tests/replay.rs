@@ -342,11 +342,19 @@ fn every_warm_frame_of_a_20000_point_sequence_reaches_the_cold_f_score_of_its_fr
     // own points (`pipeline.model=null`). With the fused model the warm
     // frame evolves on other points than the cold reference; it must
     // still not fall behind it on the whole (below).
-    let off = warm_vs_cold(&bag, "pipeline.model=null");
+    let off = warm_vs_cold(&bag, &["pipeline.model=null"]);
     assert!(off.iter().all(|&d| d <= 0.01), "{off:.3?}");
     // Measured with the model, without the background rebuild: dF mean
-    // -0.023, largest -0.000.
-    let on = warm_vs_cold(&bag, "pipeline.rebuild=null");
+    // -0.001, largest +0.028. Without the completion as a sphere too
+    // (`membrane.view.sphere`): this bowl first faces the camera with its
+    // outside, a hemisphere, and is completed into a ball for four frames,
+    // until its rim turns into view. The warm chain alone does not unlearn
+    // that ball (dF up to +0.073 from frame 5 on); the rebuild does (the
+    // check below).
+    let on = warm_vs_cold(
+        &bag,
+        &["pipeline.rebuild=null", "membrane.view.sphere=null"],
+    );
     let mean = on.iter().sum::<f64>() / on.len() as f64;
     assert!(mean <= 0.0, "{on:.3?}");
     assert!(on.iter().all(|&d| d <= 0.03), "{on:.3?}");
@@ -356,8 +364,11 @@ fn every_warm_frame_of_a_20000_point_sequence_reaches_the_cold_f_score_of_its_fr
     // from frame 12 on. Measured: dF mean +0.027, largest +0.094 (frames
     // 12-18: +0.05 to +0.09). Adopting a rebuild only when its η_g is at
     // least the warm frame's lowers the late gap (largest +0.064) but does
-    // not close it. Held where it is, not accepted as the goal.
-    let rebuilt = warm_vs_cold(&bag, "pipeline.model={}");
+    // not close it. Held where it is, not accepted as the goal. With the
+    // completion as a sphere (the default) and the rebuild adopted only
+    // when it fits the frame (`rebuild.max_misfit`): dF mean -0.008,
+    // largest +0.045.
+    let rebuilt = warm_vs_cold(&bag, &["pipeline.model={}"]);
     let mean = rebuilt.iter().sum::<f64>() / rebuilt.len() as f64;
     assert!(mean <= 0.04, "{rebuilt:.3?}");
     assert!(rebuilt.iter().all(|&d| d <= 0.11), "{rebuilt:.3?}");
@@ -367,8 +378,10 @@ fn every_warm_frame_of_a_20000_point_sequence_reaches_the_cold_f_score_of_its_fr
 /// search thread, `set`), after checking that each has at least 12 000
 /// points, is warm after the first, and took at most a quarter of the
 /// cold reference's iterations.
-fn warm_vs_cold(bag: &Bag, set: &str) -> Vec<f64> {
-    let cfg = config(&["pipeline.deadline_ms=0", "membrane.step.threads=1", set]);
+fn warm_vs_cold(bag: &Bag, sets: &[&str]) -> Vec<f64> {
+    let set = sets.join(" ");
+    let fixed = ["pipeline.deadline_ms=0", "membrane.step.threads=1"];
+    let cfg = config(&[&fixed[..], sets].concat());
     let frames = sepmem::eval::replay_scored(bag, &cfg, 1).unwrap();
     assert_eq!(frames.len(), 20);
     let mut dfs = Vec::new();

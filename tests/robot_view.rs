@@ -30,7 +30,8 @@
 //! A bottle and a capsule turning about a vertical axis are completed as
 //! solids of revolution (`membrane.view.revolution`), and the bottle's
 //! lobe beyond that solid is carved (`carve_delta`): both are checked
-//! against themselves switched off.
+//! against themselves switched off. So is a turning ball's completion as a
+//! sphere (`membrane.view.sphere`).
 //!
 //! The background rebuild (`pipeline.rebuild`: a cold membrane on a copy of
 //! the fused model, off the frame path, that a warm frame three frames later
@@ -194,6 +195,26 @@ fn solids_of_revolution_are_completed_and_their_lobes_carved() {
     assert!(
         f >= f_off + 0.15,
         "capsule: F {f} vs {f_off} without the completion"
+    );
+}
+
+#[test]
+fn a_turning_ball_is_completed_as_a_sphere() {
+    // Measured: last-third F 0.997, IoU 0.986, largest volume ratio 1.00;
+    // without the completion 0.541, 0.653, 0.69 (the fused model holds the
+    // cap the camera faces: the ball's spin cannot be registered).
+    let ball = replay("turn_sphere");
+    assert_meshed_within_the_cap("turn_sphere", &ball);
+    let (f, iou, ratio) = closure(&ball);
+    assert!(
+        f >= 0.95 && iou >= 0.93 && (0.85..=1.15).contains(&ratio),
+        "ball: {f} {iou} {ratio}"
+    );
+    let off = ["-q", "--set", "membrane.view.sphere=null"];
+    let (f_off, _, ratio_off) = closure(&replay_with("turn_sphere", &off));
+    assert!(
+        f >= f_off + 0.3 && ratio_off < 0.85,
+        "ball: F {f} vs {f_off} (volume {ratio_off}) without the completion"
     );
 }
 

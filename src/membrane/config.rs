@@ -561,6 +561,45 @@ pub struct ViewConfig {
     /// The completion of a fused cloud that is a surface of revolution
     /// ([`super::revolution`]); `None` turns it off.
     pub revolution: Option<RevolutionConfig>,
+    /// The completion of a fused cloud that is a sphere cap
+    /// ([`super::sphere`]), when it is no surface of revolution; `None`
+    /// turns it off.
+    pub sphere: Option<SphereConfig>,
+}
+
+/// `membrane.view.sphere`: when a fused cloud counts as a sphere cap, and
+/// which points of its sphere complete it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SphereConfig {
+    /// Largest median distance of a point to the fitted sphere, in δ.
+    pub max_misfit_delta: f64,
+    /// Largest length of the mean unit direction from the centre to the
+    /// points (0.5 on an evenly sampled hemisphere): the cap fixes the
+    /// sphere.
+    pub max_spread: f64,
+    /// Largest share of the completed points that some view saw empty.
+    pub max_contradicted: f64,
+    /// Completed points within this many δ of a fused point are dropped.
+    pub gap_delta: f64,
+    /// At most this many completed points per fused point.
+    pub max_added: f64,
+    /// Beyond the ball by more than this many δ, the inward force may
+    /// carve, as where a view saw empty; `None`: only there.
+    pub carve_delta: Option<f64>,
+}
+
+impl Default for SphereConfig {
+    fn default() -> Self {
+        Self {
+            max_misfit_delta: 0.25,
+            max_spread: 0.7,
+            max_contradicted: 0.02,
+            gap_delta: 1.5,
+            max_added: 2.0,
+            carve_delta: Some(4.0),
+        }
+    }
 }
 
 /// `membrane.view.revolution`: when a fused cloud counts as a surface of
@@ -650,6 +689,7 @@ impl Default for ViewConfig {
             back: None,
             fused_completion: None,
             revolution: Some(RevolutionConfig::default()),
+            sphere: Some(SphereConfig::default()),
         }
     }
 }
@@ -729,7 +769,34 @@ pub fn validate(cfg: &MembraneConfig) -> Result<(), ConfigError> {
         "view.fused_completion.gap_delta",
         "must be a finite value >= 0",
     )?;
-    validate_revolution(cfg.view.revolution.as_ref())
+    validate_revolution(cfg.view.revolution.as_ref())?;
+    validate_sphere(cfg.view.sphere.as_ref())
+}
+
+fn validate_sphere(s: Option<&SphereConfig>) -> Result<(), ConfigError> {
+    let Some(s) = s else {
+        return Ok(());
+    };
+    let shares = [
+        (s.max_spread, "view.sphere.max_spread"),
+        (s.max_contradicted, "view.sphere.max_contradicted"),
+    ];
+    for (v, key) in shares {
+        check((0.0..=1.0).contains(&v), key, "must lie in [0, 1]")?;
+    }
+    let positive = [
+        (s.max_misfit_delta, "view.sphere.max_misfit_delta"),
+        (s.gap_delta, "view.sphere.gap_delta"),
+        (s.max_added, "view.sphere.max_added"),
+    ];
+    for (v, key) in positive {
+        check(pos(v), key, "must be positive")?;
+    }
+    check(
+        s.carve_delta.is_none_or(non_negative),
+        "view.sphere.carve_delta",
+        "must be finite and at least 0 (null: no carving beyond the ball)",
+    )
 }
 
 fn validate_revolution(r: Option<&RevolutionConfig>) -> Result<(), ConfigError> {

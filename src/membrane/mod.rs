@@ -42,7 +42,9 @@ pub mod prepare;
 pub mod regularize;
 pub mod revolution;
 pub mod schedule;
+pub mod solid;
 pub mod spacing;
+pub mod sphere;
 pub mod step;
 pub mod unbias;
 pub mod view;
@@ -51,7 +53,7 @@ pub use config::{
     AttributeWeight, Completion, ConfigError, EncloseConfig, FitConfig, FusedCompletionConfig,
     GrowthConfig, InitConfig, InsideDenserConfig, InwardConfig, LocalSpacingConfig, MembraneConfig,
     PoleAxis, PoleTensionConfig, PrepareConfig, RegularizeConfig, RevolutionConfig, ScheduleConfig,
-    SearchDelta, StepConfig, ViewConfig,
+    SearchDelta, SphereConfig, StepConfig, ViewConfig,
 };
 pub use extract::{extract_mesh, SEPARABILITY_CHANNEL};
 

@@ -24,6 +24,7 @@
 
 use super::config::{Completion, MembraneConfig, PrepareConfig, SearchDelta};
 use super::occupancy::OutsideGrid;
+use super::solid::Solid;
 use super::view::{self, Seen};
 use super::MembraneError;
 use crate::cloud::{Aabb, CloudError, PointCloud, Vec3};
@@ -69,8 +70,8 @@ pub(crate) struct Prepared<'a> {
     pub(crate) view: Option<view::ViewBuffer>,
     /// The free space of the views a fused cloud was made from.
     pub(crate) free: Option<&'a dyn view::FreeSpace>,
-    /// The solid of revolution the fused cloud was completed to.
-    pub(crate) solid: Option<super::revolution::Solid>,
+    /// The solid the fused cloud was completed to.
+    pub(crate) solid: Option<super::solid::Solid>,
     pub(crate) index: SpatialIndex,
     pub(crate) attributes: Option<AttributeSet>,
     pub(crate) outside: Option<OutsideGrid>,
@@ -353,29 +354,52 @@ fn complete_view(
 }
 
 /// The completion of a fused cloud: revolved (`view.revolution`) when it is
-/// a surface of revolution, else mirrored (`view.fused_completion`); each
-/// added point takes δ, or its mirror source's d_i. Returns how many were
-/// added, and the solid of revolution that bounds the carving.
+/// a surface of revolution, else a sphere (`view.sphere`) when it is a
+/// sphere cap, else mirrored (`view.fused_completion`); each added point
+/// takes δ, or its mirror source's d_i. Returns how many were added, and
+/// the solid that bounds the carving.
 fn complete_fused_cloud(
     cfg: &MembraneConfig,
     free: &dyn view::FreeSpace,
     delta: f64,
     points: &mut Vec<Vec3>,
     d_used: &mut Vec<f64>,
-) -> (usize, Option<super::revolution::Solid>) {
-    let revolved = cfg
-        .view
-        .revolution
-        .as_ref()
-        .and_then(|rc| super::revolution::complete(free, rc, delta, points));
+) -> (usize, Option<Solid>) {
+    let (added, solid) = complete_as_solid(cfg, free, delta, points);
     d_used.resize(points.len(), delta);
-    let added = revolved.as_ref().map_or(0, |r| r.added);
-    let solid = revolved.and_then(|r| r.solid);
     let added = match &cfg.view.fused_completion {
         Some(fc) if added == 0 => complete_fused(free, fc, delta, points, d_used),
         _ => added,
     };
     (added, solid)
+}
+
+/// The completion of a fused cloud as a solid of revolution, else as a
+/// ball: how many points were added, and the solid when it bounds the
+/// carving.
+fn complete_as_solid(
+    cfg: &MembraneConfig,
+    free: &dyn view::FreeSpace,
+    delta: f64,
+    points: &mut Vec<Vec3>,
+) -> (usize, Option<Solid>) {
+    let (revolution, sphere) = (cfg.view.revolution.as_ref(), cfg.view.sphere.as_ref());
+    if revolution.is_none() && sphere.is_none() {
+        return (0, None);
+    }
+    let index = KnnIndex::new(points.clone());
+    if let Some(r) =
+        revolution.and_then(|rc| super::revolution::complete(free, rc, delta, &index, points))
+    {
+        return (r.added, r.solid.map(Solid::Revolution));
+    }
+    let Some((sc, c)) = sphere
+        .and_then(|sc| super::sphere::complete(free, sc, delta, &index, points).map(|c| (sc, c)))
+    else {
+        return (0, None);
+    };
+    let solid = sc.carve_delta.map(|m| Solid::Ball(c.ball, m * delta));
+    (c.added, solid)
 }
 
 /// The mirrored completion of a fused cloud (`view.fused_completion`,

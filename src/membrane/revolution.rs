@@ -21,7 +21,8 @@
 //!   least `min_determinacy` times its smallest. Every normal line of a
 //!   sphere meets its centre, so every axis through the centre fits a ball,
 //!   or a bowl seen from below; revolving such a bowl about an axis across
-//!   it closes it into a ball;
+//!   it closes it into a ball (a ball is completed as a sphere instead,
+//!   [`super::sphere`]);
 //! - its points lie on the rings of one profile `r(h)` along the axis (the
 //!   median distance to the ring at most `max_ring_delta`·δ);
 //! - the axis passes through the object: its smallest ring is at most
@@ -198,7 +199,7 @@ pub fn fit_axis(points: &[Vec3], normals: &[Vec3]) -> Option<(Axis, f64)> {
 /// The upper median of non-empty `values` (the upper one of the middle
 /// pair). Not [`crate::density::median_of`], which averages the middle
 /// pair: with it the 39 sequences' median last-third F read 0.807, not 0.840.
-fn upper_median(values: &mut [f64]) -> f64 {
+pub(crate) fn upper_median(values: &mut [f64]) -> f64 {
     let mid = values.len() / 2;
     *values.select_nth_unstable_by(mid, f64::total_cmp).1
 }
@@ -376,24 +377,24 @@ pub struct Revolved {
     pub solid: Option<Solid>,
 }
 
-/// The revolved completion of the fused `points` (module docs), appended
-/// to them; `None` (nothing added) when the cloud is no surface of
-/// revolution, or its views disagree.
+/// The revolved completion of the fused points of `index` (module docs),
+/// appended to `points` (the same points); `None` (nothing added) when the
+/// cloud is no surface of revolution, or its views disagree.
 pub fn complete(
     free: &dyn FreeSpace,
     cfg: &RevolutionConfig,
     delta: f64,
+    index: &KnnIndex,
     points: &mut Vec<Vec3>,
 ) -> Option<Revolved> {
     if points.len() < 2 * NORMAL_K {
         return None;
     }
-    let index = KnnIndex::new(points.clone());
     let passes = |f: &AxisFit, slack: f64| {
         f.tilt <= slack * cfg.max_sin && f.determinacy * slack >= cfg.min_determinacy
     };
-    axis_of(&index, SCREEN_SAMPLES).filter(|f| passes(f, SCREEN_SLACK))?;
-    let AxisFit { axis, tilt, .. } = axis_of(&index, AXIS_SAMPLES).filter(|f| passes(f, 1.0))?;
+    axis_of(index, SCREEN_SAMPLES).filter(|f| passes(f, SCREEN_SLACK))?;
+    let AxisFit { axis, tilt, .. } = axis_of(index, AXIS_SAMPLES).filter(|f| passes(f, 1.0))?;
     let profile = Profile::of(axis, points, RING_BIN_DELTA * delta)?;
     if profile.misfit(points) > cfg.max_ring_delta * delta
         || profile.ring_ratio() > cfg.max_ring_ratio
@@ -459,7 +460,8 @@ mod tests {
         cfg: &RevolutionConfig,
         points: &mut Vec<Vec3>,
     ) -> Option<Revolved> {
-        complete(free, cfg, 0.004, points)
+        let index = KnnIndex::new(points.clone());
+        complete(free, cfg, 0.004, &index, points)
     }
 
     /// The back direction of [`half_capsule`]: across `dir`.

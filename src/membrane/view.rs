@@ -331,8 +331,8 @@ pub enum Seen<'a> {
     /// The cloud is one depth view.
     View(&'a ViewBuffer),
     /// A fused cloud, with the free space of the views it was made from,
-    /// and the solid of revolution it was completed to.
-    Views(&'a dyn FreeSpace, Option<&'a super::revolution::Solid>),
+    /// and the solid it was completed to.
+    Views(&'a dyn FreeSpace, Option<&'a super::solid::Solid>),
 }
 
 impl<'a> Seen<'a> {
@@ -341,7 +341,7 @@ impl<'a> Seen<'a> {
     pub fn of(
         view: Option<&'a ViewBuffer>,
         free: Option<&'a dyn FreeSpace>,
-        solid: Option<&'a super::revolution::Solid>,
+        solid: Option<&'a super::solid::Solid>,
     ) -> Self {
         match (view, free) {
             (Some(vb), _) => Self::View(vb),
@@ -362,7 +362,7 @@ impl<'a> Seen<'a> {
     /// Whether the inward force may take `p` for outside: anywhere without
     /// a view; with one, only where it was seen empty or lies beyond the
     /// completion's back; with fused views, only where one saw it empty or
-    /// beyond the solid of revolution they were completed to.
+    /// beyond the solid they were completed to.
     pub fn may_be_outside(&self, p: &Vec3) -> bool {
         match self {
             Self::AllAround => true,

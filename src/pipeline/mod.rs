@@ -487,6 +487,11 @@ struct Previous {
     /// not explain the next frame either, the model is what is wrong, and
     /// the track is lost.
     refitted: bool,
+    /// A shape prior completed the points this surface was evolved on
+    /// (`points_completed` > 0). Its η_g then counts the completed points,
+    /// and compares with the next frame's only when that one is completed
+    /// too, or neither is.
+    completed: bool,
 }
 
 impl Previous {
@@ -756,8 +761,10 @@ impl Tracker {
         let mut iterations = rec.report.iterations;
         let mut final_path = path;
 
+        let completed = rec.report.points_completed > 0;
+        let comparable = |prev: &&Previous| prev.completed == completed;
         if path == StartPath::Warm {
-            if let Some(prev) = &self.previous {
+            if let Some(prev) = self.previous.as_ref().filter(comparable) {
                 let eta = rec.report.eta_final;
                 let fail_below = cfg.warm_eta_ratio * prev.eta;
                 let drift_below = cfg.warm_eta_ref_ratio * prev.eta_ref;
@@ -815,7 +822,7 @@ impl Tracker {
                 tracing::debug!(stream = %self.key, "warm fit not prepared: {e}");
             }
         }
-        let eta_ref = match (final_path, &self.previous) {
+        let eta_ref = match (final_path, self.previous.as_ref().filter(comparable)) {
             (StartPath::Warm, Some(prev)) => prev.eta_ref,
             _ => rec.report.eta_final,
         };
@@ -835,6 +842,7 @@ impl Tracker {
             eta_ref,
             motion: motion.unwrap_or_else(align::Rigid::identity),
             refitted: final_path == StartPath::Cold && matches!(reason, PathReason::Refit { .. }),
+            completed,
         });
         let urgency = match deadline {
             Some(_) => rebuild::Urgency::Idle,
