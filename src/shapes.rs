@@ -74,8 +74,9 @@ pub const NAMES: [&str; 7] = [
 ];
 
 /// Further procedural shapes for the robot's-view sequences (`sepmem synth`;
-/// issue 20 names a capsule and a banana-like bent tube), not in Table 1.
-pub const SEQUENCE_NAMES: [&str; 2] = ["capsule", "bent_tube"];
+/// issue 20 names a capsule and a banana-like bent tube; a can is the
+/// solid of revolution whose rings are all alike), not in Table 1.
+pub const SEQUENCE_NAMES: [&str; 3] = ["capsule", "bent_tube", "can"];
 
 /// Every procedural shape [`by_name`] knows: Table 1's, then the sequences'.
 pub fn procedural_names() -> impl Iterator<Item = &'static str> {
@@ -99,6 +100,7 @@ pub fn by_name(name: &str, res: usize) -> Result<Shape, ShapeError> {
         "mug" => mug(res),
         "capsule" => capsule(res),
         "bent_tube" => bent_tube(res),
+        "can" => can(res),
         other => Err(ShapeError::Unknown(other.to_string())),
     }
 }
@@ -517,6 +519,27 @@ pub fn capsule(res: usize) -> Result<Shape, ShapeError> {
         Some(area),
         len + 2.0 * r,
     ))
+}
+
+/// Can (height 1): a cylinder of radius 0.28 with flat ends and filleted
+/// rims (radius 0.03), as a surface of revolution. The analytic measures
+/// are those of the continuously revolved profile.
+///
+/// # Errors
+/// [`ShapeError::Resolution`] when `res < 8`.
+pub fn can(res: usize) -> Result<Shape, ShapeError> {
+    check_res("can", res, 8)?;
+    let (r, f, top) = (0.28f64, 0.03f64, 1.0f64);
+    let s = res.max(8);
+    let mut p = vec![(0.0, 0.0)];
+    line(&mut p, (r - f, 0.0), s / 4);
+    arc(&mut p, (r - f, f), f, -PI / 2.0, 0.0, s / 8 + 1);
+    line(&mut p, (r, top - f), s);
+    arc(&mut p, (r - f, top - f), f, 0.0, PI / 2.0, s / 8 + 1);
+    line(&mut p, (0.0, top), s / 4);
+    let (vol, area) = revolved_polyline_measures(&p);
+    let mesh = revolve(&p, res);
+    Ok(finish("can", mesh, 0, Some(vol), Some(area), 1.0))
 }
 
 /// The bent tube's arc radius, tube radius and half angle.

@@ -616,8 +616,9 @@ pub struct RevolutionConfig {
     pub min_determinacy: f64,
     /// Largest median distance of a point to its ring, in δ.
     pub max_ring_delta: f64,
-    /// The smallest ring is at most this share of the largest: the axis
-    /// passes through the object (not a torus arc's bend centre).
+    /// The smallest ring is at most this share of the largest, or no view
+    /// saw through the axis: the axis passes through the object (not a
+    /// torus arc's bend centre).
     pub max_ring_ratio: f64,
     /// Largest share of the revolved points that some view saw empty.
     pub max_contradicted: f64,

@@ -16,7 +16,7 @@ D=tests/data/bags
 #     default 640×480, f = 525 camera at 1 m, Kinect noise, no outliers.
 "$SEPMEM" synth -o "$D/synth_turn_mug.mcap" --shapes mug --motion turn --degrees 180 \
     --frames 30 --distance 1.0 --noise kinect --outliers 0 --mesh-res 48 --seed 4 --quiet
-# (d) the robot's view (issue 20): the issue's shapes, a bottle and a ball turning 180° in
+# (d) the robot's view (issue 20): the issue's shapes, a bottle, a ball and a can turning 180° in
 #     place over 30 frames (6° per frame), one orbited by the camera, and three swapped on
 #     one stream; a 480×360, f = 393.75 camera (the default's field of view at
 #     0.56× its points, to keep the bags small) at 1 m, Kinect noise, no outliers.
@@ -28,8 +28,10 @@ CAM="--width 480 --height 360 --focal 393.75 --distance 1.0 --noise kinect --out
 for shape in capsule rounded_box bent_tube bottle; do
     "$SEPMEM" synth -o "$R/turn_$shape.mcap" --shapes $shape --motion turn $CAM --mesh-res 32 --seed 4 --quiet
 done
-# A ball 0.12 m across (at 0.2 m its bag was 1.6 MB).
-"$SEPMEM" synth -o "$R/turn_sphere.mcap" --shapes sphere --motion turn $CAM --mesh-res 32 --size 0.12 --seed 4 --quiet
+# A ball 0.12 m across (at 0.2 m its bag was 1.6 MB), and a can 0.12 m tall.
+for shape in sphere can; do
+    "$SEPMEM" synth -o "$R/turn_$shape.mcap" --shapes $shape --motion turn $CAM --mesh-res 32 --size 0.12 --seed 4 --quiet
+done
 "$SEPMEM" synth -o "$R/turn_ycb_banana.mcap" --shapes "$YCB/YcbBanana.obj" --motion turn $CAM --seed 4 --quiet
 "$SEPMEM" synth -o "$R/orbit_bent_tube.mcap" --shapes bent_tube --motion orbit $CAM --mesh-res 32 --seed 7 --quiet
 "$SEPMEM" synth -o "$R/orbit_ycb_banana.mcap" --shapes "$YCB/YcbBanana.obj" --motion orbit $CAM --seed 8 --quiet
