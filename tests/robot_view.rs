@@ -29,10 +29,9 @@
 //!
 //! A bottle, a capsule and a can turning about a vertical axis are
 //! completed as solids of revolution (`membrane.view.revolution`), and the
-//! bottle's
-//! lobe beyond that solid is carved (`carve_delta`): both are checked
-//! against themselves switched off. So is a turning ball's completion as a
-//! sphere (`membrane.view.sphere`).
+//! bottle's lobe beyond that solid is carved (`carve_delta`): both are
+//! checked against themselves switched off. So is a turning ball's
+//! completion as a sphere (`membrane.view.sphere`).
 //!
 //! The background rebuild (`pipeline.rebuild`: a cold membrane on a copy of
 //! the fused model, off the frame path, that a warm frame three frames later

@@ -736,6 +736,11 @@ fn check_each(
     }
 }
 
+/// A share: a value in [0, 1].
+fn share(x: f64) -> bool {
+    (0.0..=1.0).contains(&x)
+}
+
 /// A positive, finite value.
 fn pos(x: f64) -> bool {
     x > 0.0 && x.is_finite()
@@ -778,21 +783,23 @@ fn validate_sphere(s: Option<&SphereConfig>) -> Result<(), ConfigError> {
     let Some(s) = s else {
         return Ok(());
     };
-    let shares = [
-        (s.max_spread, "view.sphere.max_spread"),
-        (s.max_contradicted, "view.sphere.max_contradicted"),
-    ];
-    for (v, key) in shares {
-        check((0.0..=1.0).contains(&v), key, "must lie in [0, 1]")?;
-    }
-    let positive = [
-        (s.max_misfit_delta, "view.sphere.max_misfit_delta"),
-        (s.gap_delta, "view.sphere.gap_delta"),
-        (s.max_added, "view.sphere.max_added"),
-    ];
-    for (v, key) in positive {
-        check(pos(v), key, "must be positive")?;
-    }
+    check_each(
+        &[
+            ("view.sphere.max_spread", s.max_spread),
+            ("view.sphere.max_contradicted", s.max_contradicted),
+        ],
+        share,
+        "must lie in [0, 1]",
+    )?;
+    check_each(
+        &[
+            ("view.sphere.max_misfit_delta", s.max_misfit_delta),
+            ("view.sphere.gap_delta", s.gap_delta),
+            ("view.sphere.max_added", s.max_added),
+        ],
+        pos,
+        "must be positive",
+    )?;
     check(
         s.carve_delta.is_none_or(non_negative),
         "view.sphere.carve_delta",
@@ -804,25 +811,27 @@ fn validate_revolution(r: Option<&RevolutionConfig>) -> Result<(), ConfigError> 
     let Some(r) = r else {
         return Ok(());
     };
-    let shares = [
-        (r.max_sin, "view.revolution.max_sin"),
-        (r.max_ring_ratio, "view.revolution.max_ring_ratio"),
-        (r.max_contradicted, "view.revolution.max_contradicted"),
-    ];
-    for (v, key) in shares {
-        check((0.0..=1.0).contains(&v), key, "must lie in [0, 1]")?;
-    }
-    let positive = [
-        (r.min_determinacy, "view.revolution.min_determinacy"),
-        (r.max_ring_delta, "view.revolution.max_ring_delta"),
-        (r.gap_delta, "view.revolution.gap_delta"),
-        (r.max_added, "view.revolution.max_added"),
-    ];
-    for (v, key) in positive {
-        check(pos(v), key, "must be positive")?;
-    }
+    check_each(
+        &[
+            ("view.revolution.max_sin", r.max_sin),
+            ("view.revolution.max_ring_ratio", r.max_ring_ratio),
+            ("view.revolution.max_contradicted", r.max_contradicted),
+        ],
+        share,
+        "must lie in [0, 1]",
+    )?;
+    check_each(
+        &[
+            ("view.revolution.min_determinacy", r.min_determinacy),
+            ("view.revolution.max_ring_delta", r.max_ring_delta),
+            ("view.revolution.gap_delta", r.gap_delta),
+            ("view.revolution.max_added", r.max_added),
+        ],
+        pos,
+        "must be positive",
+    )?;
     check(
-        r.carve_delta.is_none_or(|m| m >= 0.0 && m.is_finite()),
+        r.carve_delta.is_none_or(non_negative),
         "view.revolution.carve_delta",
         "must be finite and at least 0 (null: no carving beyond the solid)",
     )

@@ -94,6 +94,7 @@
 //! four tori included.
 
 use super::config::RevolutionConfig;
+use super::solid::Admission;
 use super::view::FreeSpace;
 use crate::cloud::Vec3;
 use crate::spatial::KnnIndex;
@@ -427,22 +428,12 @@ pub fn complete(
     if profile.misfit(points) > cfg.max_ring_delta * delta || !through {
         return None;
     }
-    let gap2 = (cfg.gap_delta * delta).powi(2);
-    let mut seen_free = 0usize;
-    let added: Vec<Vec3> = profile
-        .revolved(delta)
-        .filter(|q| index.nearest_one(q).0 > gap2)
-        .filter(|q| {
-            let free = free.is_seen_free(q);
-            seen_free += usize::from(free);
-            !free
-        })
-        .collect();
-    let total = (seen_free + added.len()).max(1) as f64;
-    let cap = cfg.max_added * points.len() as f64;
-    if seen_free as f64 > cfg.max_contradicted * total || added.len() as f64 > cap {
-        return None;
-    }
+    let admission = Admission {
+        gap: cfg.gap_delta * delta,
+        max_contradicted: cfg.max_contradicted,
+        cap: cfg.max_added * points.len() as f64,
+    };
+    let added = admission.admit(profile.revolved(delta), index, free)?;
     tracing::trace!(tilt, added = added.len(), "revolved completion");
     points.extend_from_slice(&added);
     Some(Revolved {
@@ -455,50 +446,14 @@ pub fn complete(
 mod tests {
     use super::*;
 
-    /// Views that saw empty everything beyond the plane through the point
-    /// `.0` across the direction `.1`; `None`: nothing.
-    struct SeenBeyond(Option<(Vec3, Vec3)>);
+    use crate::membrane::view::SeenWhere;
 
     /// No view saw anything empty.
-    const UNSEEN: SeenBeyond = SeenBeyond(None);
+    const UNSEEN: SeenWhere<fn(&Vec3) -> bool> = SeenWhere(|_| false);
 
-    /// Views that saw empty the ball of radius `.1` about `.0`.
-    struct SeenNear(Vec3, f64);
-
-    impl FreeSpace for SeenNear {
-        fn is_seen_free(&self, p: &Vec3) -> bool {
-            (p - self.0).norm() < self.1
-        }
-        fn latest_eye(&self) -> Option<Vec3> {
-            None
-        }
-        fn on_latest_surface(&self, _: &Vec3) -> bool {
-            false
-        }
-        fn views_kept(&self) -> usize {
-            1
-        }
-        fn eyes(&self) -> Vec<Vec3> {
-            Vec::new()
-        }
-    }
-
-    impl FreeSpace for SeenBeyond {
-        fn is_seen_free(&self, p: &Vec3) -> bool {
-            self.0.is_some_and(|(at, dir)| (p - at).dot(&dir) > 0.0)
-        }
-        fn latest_eye(&self) -> Option<Vec3> {
-            None
-        }
-        fn on_latest_surface(&self, _: &Vec3) -> bool {
-            false
-        }
-        fn views_kept(&self) -> usize {
-            1
-        }
-        fn eyes(&self) -> Vec<Vec3> {
-            Vec::new()
-        }
+    /// Views that saw empty the ball of radius `r` about `c`.
+    fn seen_near(c: Vec3, r: f64) -> impl FreeSpace {
+        SeenWhere(move |p: &Vec3| (p - c).norm() < r)
     }
 
     /// [`complete`] at δ = 4 mm.
@@ -647,7 +602,7 @@ mod tests {
         };
         let profile = Profile::of(axis, &arc, 0.008).expect("a profile");
         assert!(profile.ring_ratio() > cfg.max_ring_ratio);
-        assert!(!profile.axis_unseen_through(&SeenNear(Vec3::zeros(), 0.1)));
+        assert!(!profile.axis_unseen_through(&seen_near(Vec3::zeros(), 0.1)));
         assert!(profile.axis_unseen_through(&UNSEEN));
     }
 
@@ -674,7 +629,7 @@ mod tests {
         assert!(profile.ring_ratio() > RevolutionConfig::default().max_ring_ratio);
         assert!(profile.axis_unseen_through(&UNSEEN));
         // A view that saw through its middle: no axis through the object.
-        assert!(!profile.axis_unseen_through(&SeenNear(centre, 0.03)));
+        assert!(!profile.axis_unseen_through(&seen_near(centre, 0.03)));
     }
 
     #[test]
@@ -715,7 +670,8 @@ mod tests {
         let mut points = half_capsule(centre, dir);
         assert!(points.iter().all(|p| p.iter().all(|c| c.is_finite())));
         let cfg = RevolutionConfig::default();
-        let free = SeenBeyond(Some((centre, back_of(dir))));
+        let back = back_of(dir);
+        let free = SeenWhere(move |p: &Vec3| (p - centre).dot(&back) > 0.0);
         assert!(complete_on(&free, &cfg, &mut points).is_none());
         // Without that evidence it would have been completed.
         assert!(complete_on(&UNSEEN, &cfg, &mut points).is_some_and(|r| r.added > 0));

@@ -10,7 +10,47 @@
 //! the bottles of the 39 sequences: their largest volume ratio 1.86–1.94 →
 //! 1.26–1.44 ([`super::revolution`]).
 
+use super::view::FreeSpace;
 use crate::cloud::Vec3;
+use crate::spatial::KnnIndex;
+
+/// Which of a completion's candidate points join the fused ones.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Admission {
+    /// Candidates within this distance of a fused point are dropped.
+    pub gap: f64,
+    /// Largest share of the candidates beyond the gap that some view saw
+    /// empty: more, and the views disagree with the completion.
+    pub max_contradicted: f64,
+    /// At most this many points are added.
+    pub cap: f64,
+}
+
+impl Admission {
+    /// The `candidates` farther than the gap from every fused point of
+    /// `index` that no view saw empty; `None` when the views contradict
+    /// the completion, or more than the cap remain.
+    pub(crate) fn admit(
+        &self,
+        candidates: impl Iterator<Item = Vec3>,
+        index: &KnnIndex,
+        free: &dyn FreeSpace,
+    ) -> Option<Vec<Vec3>> {
+        let gap2 = self.gap * self.gap;
+        let mut seen_free = 0usize;
+        let added: Vec<Vec3> = candidates
+            .filter(|q| index.nearest_one(q).0 > gap2)
+            .filter(|q| {
+                let free = free.is_seen_free(q);
+                seen_free += usize::from(free);
+                !free
+            })
+            .collect();
+        let total = (seen_free + added.len()).max(1) as f64;
+        let contradicted = seen_free as f64 > self.max_contradicted * total;
+        (!contradicted && added.len() as f64 <= self.cap).then_some(added)
+    }
+}
 
 /// A completed solid with its carving margin.
 #[derive(Debug, Clone)]

@@ -48,6 +48,7 @@
 //! 0.7 (0.37δ).
 
 use super::config::SphereConfig;
+use super::solid::Admission;
 use super::view::FreeSpace;
 use crate::cloud::Vec3;
 use crate::spatial::KnnIndex;
@@ -188,25 +189,16 @@ pub fn complete(
     {
         return None;
     }
-    let cap = cfg.max_added * points.len() as f64;
-    if 4.0 * std::f64::consts::PI * (ball.radius / delta).powi(2) > 2.0 * cap {
+    let admission = Admission {
+        gap: cfg.gap_delta * delta,
+        max_contradicted: cfg.max_contradicted,
+        cap: cfg.max_added * points.len() as f64,
+    };
+    // The lattice's size bounds the work before the admission counts it.
+    if 4.0 * std::f64::consts::PI * (ball.radius / delta).powi(2) > 2.0 * admission.cap {
         return None;
     }
-    let gap2 = (cfg.gap_delta * delta).powi(2);
-    let mut seen_free = 0usize;
-    let added: Vec<Vec3> = ball
-        .lattice(delta)
-        .filter(|q| index.nearest_one(q).0 > gap2)
-        .filter(|q| {
-            let free = free.is_seen_free(q);
-            seen_free += usize::from(free);
-            !free
-        })
-        .collect();
-    let total = (seen_free + added.len()).max(1) as f64;
-    if seen_free as f64 > cfg.max_contradicted * total || added.len() as f64 > cap {
-        return None;
-    }
+    let added = admission.admit(ball.lattice(delta), index, free)?;
     tracing::trace!(
         radius = ball.radius,
         added = added.len(),
@@ -224,47 +216,10 @@ mod tests {
     use super::*;
     use std::f64::consts::{FRAC_PI_2, PI};
 
+    use crate::membrane::view::SeenWhere;
+
     /// No view saw anything empty.
-    struct Unseen;
-
-    /// Views that saw empty everything beyond the plane z = `.0`.
-    struct SeenAbove(f64);
-
-    impl FreeSpace for Unseen {
-        fn is_seen_free(&self, _: &Vec3) -> bool {
-            false
-        }
-        fn latest_eye(&self) -> Option<Vec3> {
-            None
-        }
-        fn on_latest_surface(&self, _: &Vec3) -> bool {
-            false
-        }
-        fn views_kept(&self) -> usize {
-            1
-        }
-        fn eyes(&self) -> Vec<Vec3> {
-            Vec::new()
-        }
-    }
-
-    impl FreeSpace for SeenAbove {
-        fn is_seen_free(&self, p: &Vec3) -> bool {
-            p.z > self.0
-        }
-        fn latest_eye(&self) -> Option<Vec3> {
-            None
-        }
-        fn on_latest_surface(&self, _: &Vec3) -> bool {
-            false
-        }
-        fn views_kept(&self) -> usize {
-            1
-        }
-        fn eyes(&self) -> Vec<Vec3> {
-            Vec::new()
-        }
-    }
+    const UNSEEN: SeenWhere<fn(&Vec3) -> bool> = SeenWhere(|_| false);
 
     const CENTRE: Vec3 = Vec3::new(0.05, -0.02, 0.9);
     const RADIUS: f64 = 0.1;
@@ -316,7 +271,7 @@ mod tests {
         let mut points = cap(FRAC_PI_2, 0.001);
         let n = points.len();
         let cfg = SphereConfig::default();
-        let done = complete_on(&Unseen, &cfg, &mut points).expect("completed");
+        let done = complete_on(&UNSEEN, &cfg, &mut points).expect("completed");
         assert_eq!(done.added, points.len() - n);
         assert!(done.added > n / 2, "{} of {n}", done.added);
         for q in &points[n..] {
@@ -336,7 +291,7 @@ mod tests {
     fn a_narrow_cap_an_ellipsoid_and_a_contradicted_ball_are_not_completed() {
         let cfg = SphereConfig::default();
         // A cap of half-angle 35°: its mean direction is 0.91 long.
-        assert!(complete_on(&Unseen, &cfg, &mut cap(0.6, 0.0)).is_none());
+        assert!(complete_on(&UNSEEN, &cfg, &mut cap(0.6, 0.0)).is_none());
         // The hemisphere squashed to an ellipsoid's 0.1 × 0.1 × 0.07: the
         // sphere through its rim and pole misses it by 1.5 mm (median),
         // 0.37δ.
@@ -347,11 +302,17 @@ mod tests {
                 CENTRE + Vec3::new(q.x, q.y, 0.7 * q.z)
             })
             .collect();
-        assert!(complete_on(&Unseen, &cfg, &mut squashed).is_none());
-        // A view saw through the back half (a bowl seen from beside).
+        assert!(complete_on(&UNSEEN, &cfg, &mut squashed).is_none());
+        // A view saw through the back half above z = 0.92 (a bowl seen
+        // from beside).
         let mut points = cap(FRAC_PI_2, 0.0);
-        assert!(complete_on(&SeenAbove(CENTRE.z + 0.02), &cfg, &mut points).is_none());
+        assert!(complete_on(
+            &SeenWhere(|p: &Vec3| p.z > CENTRE.z + 0.02),
+            &cfg,
+            &mut points
+        )
+        .is_none());
         // Without that evidence it would have been completed.
-        assert!(complete_on(&Unseen, &cfg, &mut points).is_some());
+        assert!(complete_on(&UNSEEN, &cfg, &mut points).is_some());
     }
 }

@@ -398,6 +398,30 @@ pub trait FreeSpace: Sync {
     fn eyes(&self) -> Vec<Vec3>;
 }
 
+/// Views that saw empty where the predicate holds, and nothing else (no
+/// eye, no latest surface): the completions' tests.
+#[cfg(test)]
+pub(crate) struct SeenWhere<F>(pub F);
+
+#[cfg(test)]
+impl<F: Fn(&Vec3) -> bool + Sync> FreeSpace for SeenWhere<F> {
+    fn is_seen_free(&self, p: &Vec3) -> bool {
+        (self.0)(p)
+    }
+    fn latest_eye(&self) -> Option<Vec3> {
+        None
+    }
+    fn on_latest_surface(&self, _: &Vec3) -> bool {
+        false
+    }
+    fn views_kept(&self) -> usize {
+        1
+    }
+    fn eyes(&self) -> Vec<Vec3> {
+        Vec::new()
+    }
+}
+
 /// The view of `points` for `viewpoint` (see the module docs): `None` for
 /// `"none"`, and for `"auto"` unless the origin sees the cloud as one layer.
 pub fn resolve(viewpoint: Viewpoint, points: &[Vec3], delta: f64) -> Option<ViewBuffer> {
