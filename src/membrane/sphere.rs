@@ -267,6 +267,23 @@ mod tests {
     }
 
     #[test]
+    fn degenerate_clouds_have_no_sphere_and_are_not_completed() {
+        let cfg = SphereConfig::default();
+        let same = vec![CENTRE; 100];
+        let line: Vec<Vec3> = (0..100).map(|i| Vec3::x() * i as f64 * 0.004).collect();
+        let nan = vec![Vec3::new(f64::NAN, 0.0, 0.0); 100];
+        for cloud in [same, line, nan] {
+            assert!(Ball::fit(&cloud).is_none(), "{:?}", &cloud[..2]);
+            let mut points = cloud.clone();
+            assert!(complete_on(&UNSEEN, &cfg, &mut points).is_none());
+            assert_eq!(points.len(), cloud.len());
+        }
+        // Too few points to be fitted: not completed, whatever they are.
+        let mut few = cap(FRAC_PI_2, 0.0)[..MIN_POINTS - 1].to_vec();
+        assert!(complete_on(&UNSEEN, &cfg, &mut few).is_none());
+    }
+
+    #[test]
     fn a_hemisphere_is_completed_on_its_back() {
         let mut points = cap(FRAC_PI_2, 0.001);
         let n = points.len();
