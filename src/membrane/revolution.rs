@@ -292,12 +292,17 @@ impl Profile {
     /// object. A bent tube's axis, its bend's centre, is seen through from
     /// every side its bend faces.
     fn axis_unseen_through(&self, free: &dyn FreeSpace) -> bool {
-        let on_axis: Vec<Vec3> = (0..self.rings.len())
-            .filter(|&i| self.rings[i].is_some())
-            .map(|i| self.axis.point + self.axis.dir * (self.h0 + (i as f64 + 0.5) * self.bin))
-            .collect();
-        let seen = on_axis.iter().filter(|q| free.is_seen_free(q)).count();
-        !on_axis.is_empty() && seen * AXIS_SEEN_THROUGH <= on_axis.len()
+        let (mut heights, mut seen) = (0usize, 0usize);
+        for i in (0..self.rings.len()).filter(|&i| self.rings[i].is_some()) {
+            heights += 1;
+            seen += usize::from(free.is_seen_free(&self.centre(i)));
+        }
+        heights > 0 && seen * AXIS_SEEN_THROUGH <= heights
+    }
+
+    /// The point of the axis at the middle of ring bin `i`.
+    fn centre(&self, i: usize) -> Vec3 {
+        self.axis.point + self.axis.dir * (self.h0 + (i as f64 + 0.5) * self.bin)
     }
 
     /// The smallest ring over the largest.
@@ -315,7 +320,7 @@ impl Profile {
         rings
             .filter_map(|(i, ring)| ring.map(|r| (i, r)))
             .flat_map(move |(i, r)| {
-                let centre = self.axis.point + d * (self.h0 + (i as f64 + 0.5) * self.bin);
+                let centre = self.centre(i);
                 let k = ((TAU * r / step).ceil() as usize).max(8);
                 (0..k).map(move |j| {
                     let t = TAU * j as f64 / k as f64;
@@ -446,10 +451,7 @@ pub fn complete(
 mod tests {
     use super::*;
 
-    use crate::membrane::view::SeenWhere;
-
-    /// No view saw anything empty.
-    const UNSEEN: SeenWhere<fn(&Vec3) -> bool> = SeenWhere(|_| false);
+    use crate::membrane::view::{SeenWhere, UNSEEN};
 
     /// Views that saw empty the ball of radius `r` about `c`.
     fn seen_near(c: Vec3, r: f64) -> impl FreeSpace {

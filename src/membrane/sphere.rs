@@ -216,10 +216,7 @@ mod tests {
     use super::*;
     use std::f64::consts::{FRAC_PI_2, PI};
 
-    use crate::membrane::view::SeenWhere;
-
-    /// No view saw anything empty.
-    const UNSEEN: SeenWhere<fn(&Vec3) -> bool> = SeenWhere(|_| false);
+    use crate::membrane::view::{SeenWhere, UNSEEN};
 
     const CENTRE: Vec3 = Vec3::new(0.05, -0.02, 0.9);
     const RADIUS: f64 = 0.1;

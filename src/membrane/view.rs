@@ -403,6 +403,10 @@ pub trait FreeSpace: Sync {
 #[cfg(test)]
 pub(crate) struct SeenWhere<F>(pub F);
 
+/// No view saw anything empty.
+#[cfg(test)]
+pub(crate) const UNSEEN: SeenWhere<fn(&Vec3) -> bool> = SeenWhere(|_| false);
+
 #[cfg(test)]
 impl<F: Fn(&Vec3) -> bool + Sync> FreeSpace for SeenWhere<F> {
     fn is_seen_free(&self, p: &Vec3) -> bool {
