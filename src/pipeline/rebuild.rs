@@ -43,7 +43,9 @@
 //! median F fell to 0.846.
 //!
 //! A stream keeps at most one rebuild; a cold frame (which restarts or
-//! refits the model), a refit in the background (`pipeline.refit.path`,
+//! refits the model, and starts no rebuild unless its deadline cut its
+//! cold membrane short: a rebuild would repeat that membrane on the same
+//! points), a refit in the background (`pipeline.refit.path`,
 //! which starts one on its frame's model, due the next frame:
 //! [`Pending::hasten`]) or the stream's end cancels it, and a cancelled
 //! rebuild that has not started never runs, so the workers' queue holds at
