@@ -762,6 +762,7 @@ impl Tracker {
         let mut final_path = path;
 
         let completed = rec.report.points_completed > 0;
+        let was_completed = self.previous.as_ref().is_some_and(|p| p.completed);
         let comparable = |prev: &&Previous| prev.completed == completed;
         if path == StartPath::Warm {
             if let Some(prev) = self.previous.as_ref().filter(comparable) {
@@ -863,7 +864,15 @@ impl Tracker {
         if final_path == StartPath::Cold && rec.report.stop != membrane::StopReason::Deadline {
             self.rebuild = None;
         } else {
-            self.start_rebuild(final_path, reason, membranes, cfg, frame, urgency);
+            // A warm frame whose model the next frame's surface must come
+            // from: a refit (the surface no longer explains the points), or
+            // a shape prior that took or dropped this frame's points (the
+            // warm surface was evolved under the other prior: a bowl that
+            // showed the camera its outside was a ball until its rim turned
+            // into view, and the warm chain kept the ball for ten frames).
+            let refit = matches!(reason, PathReason::Refit { .. });
+            let urgent = final_path == StartPath::Warm && (refit || was_completed != completed);
+            self.start_rebuild(final_path, urgent, membranes, cfg, frame, urgency);
         }
         // The published mesh without the centring's curvature bias; the
         // alignment above and the next warm start keep the surface's own.
@@ -944,25 +953,25 @@ impl Tracker {
 
     /// After the frame, start the next background rebuild when none is in
     /// flight, on the pool of its `urgency`. A cold frame first drops the
-    /// one in flight: its model restarted, or a refit just rebuilt it. A
-    /// warm refit ([`RefitPath::Background`]) replaces it by one on this
-    /// frame's model that the next frame adopts, unless it is such a one
-    /// already: with a deadline a frame adopts a rebuild only once it is
-    /// done, and replacing it at every refit starved the live node's refits
-    /// (`sepmem replay --realtime` of the orbited YCB banana: 18 refits in a
-    /// row from frame 12, none adopted).
+    /// one in flight: its model restarted, or a refit just rebuilt it. An
+    /// `urgent` warm frame (a refit, [`RefitPath::Background`], or a shape
+    /// prior's switch) replaces it by one on this frame's model that the
+    /// next frame adopts, unless it is such a one already: with a deadline
+    /// a frame adopts a rebuild only once it is done, and replacing it at
+    /// every refit starved the live node's refits (`sepmem replay
+    /// --realtime` of the orbited YCB banana: 18 refits in a row from frame
+    /// 12, none adopted).
     fn start_rebuild(
         &mut self,
         path: StartPath,
-        reason: PathReason,
+        urgent: bool,
         membranes: &Membranes,
         cfg: &PipelineConfig,
         frame: u64,
         urgency: rebuild::Urgency,
     ) {
-        let refit = path == StartPath::Warm && matches!(reason, PathReason::Refit { .. });
-        let for_refit = self.rebuild.as_ref().is_some_and(|p| p.is_hastened());
-        if path == StartPath::Cold || (refit && !for_refit) {
+        let hastened = self.rebuild.as_ref().is_some_and(|p| p.is_hastened());
+        if path == StartPath::Cold || (urgent && !hastened) {
             self.rebuild = None;
         }
         let (Some(workers), Some(f)) = (&membranes.rebuild, &self.fused) else {
@@ -974,7 +983,7 @@ impl Tracker {
             let pending = workers.start(model, cfg.max_points, budget, frame, urgency);
             self.rebuild = Some(pending);
         }
-        if let (Some(pending), true) = (self.rebuild.as_mut(), refit) {
+        if let (Some(pending), true) = (self.rebuild.as_mut(), urgent) {
             pending.hasten(frame.saturating_add(1));
         }
     }

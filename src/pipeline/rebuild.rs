@@ -42,14 +42,19 @@
 //! rebuilds it gained from (last-third IoU 0.784 -> 0.643); at 1.5 the
 //! median F fell to 0.846.
 //!
-//! A stream keeps at most one rebuild; a cold frame (which restarts or
-//! refits the model, and starts no rebuild unless its deadline cut its
-//! cold membrane short: a rebuild would repeat that membrane on the same
-//! points), a refit in the background (`pipeline.refit.path`,
-//! which starts one on its frame's model, due the next frame:
-//! [`Pending::hasten`]) or the stream's end cancels it, and a cancelled
-//! rebuild that has not started never runs, so the workers' queue holds at
-//! most one rebuild per live stream.
+//! A stream keeps at most one rebuild. A cold frame (which restarts or
+//! refits the model) cancels it and starts none unless its deadline cut
+//! its cold membrane short: a rebuild would repeat that membrane on the
+//! same points. Two kinds of warm frame replace it by one on their own
+//! model, due the next frame ([`Pending::hasten`]): a refit in the
+//! background (`pipeline.refit.path`), and a frame where a shape prior's
+//! completion starts or stops, whose warm surface was evolved under the
+//! other prior (a turning bowl that first showed the camera its outside,
+//! a ball until its rim turned into view: last-third F 0.470 -> 0.552 over
+//! `benches/robot_view_eval.sh`; a turning torus +0.017, the swap -0.030,
+//! no other sequence changed). The stream's end cancels it too, and a
+//! cancelled rebuild that has not started never runs, so the workers'
+//! queue holds at most one rebuild per live stream.
 
 use crate::cloud::{PointCloud, Vec3};
 use crate::membrane::view::FreeSpace;
