@@ -52,6 +52,7 @@ use sepmem::config::Config;
 use sepmem::membrane::StopReason;
 use sepmem::pipeline::engine::decode_sample;
 use sepmem::pipeline::{Deadlines, Membranes, PathReason, StartPath, StreamKey, Tracker};
+use sepmem::PointCloud;
 use std::time::Instant;
 
 /// `sepmem replay -q` of the committed bag `name`, with the defaults.
@@ -511,6 +512,25 @@ fn a_refit_in_the_background_keeps_the_orbited_banana_warm_and_its_model() {
     );
 }
 
+/// The default configuration, its membranes, and the clouds of `topic` in
+/// the committed robot-view bag `name`, decoded as the node decodes them.
+fn frames_of(name: &str, topic: &str) -> (Config, Membranes, Vec<PointCloud>) {
+    let path = common::data_dir().join(format!("bags/robot_view/{name}.mcap"));
+    let bag = Bag::open(&path).unwrap();
+    let cfg = Config::load(None, &[]).unwrap();
+    let membranes = Membranes::new(&cfg.membrane, &cfg.pipeline).unwrap();
+    let clouds = bag
+        .read(&[topic])
+        .unwrap()
+        .into_iter()
+        .map(|m| {
+            let sample = decode_sample(topic, &m.data, &cfg.wire, &cfg.pipeline).unwrap();
+            sample.streams.into_iter().next().unwrap().cloud
+        })
+        .collect();
+    (cfg, membranes, clouds)
+}
+
 #[test]
 fn a_refit_keeps_its_rebuild_when_frames_do_not_wait_for_it() {
     // With a deadline (the live node) a frame adopts the stream's rebuild
@@ -522,20 +542,14 @@ fn a_refit_keeps_its_rebuild_when_frames_do_not_wait_for_it() {
     // follows a refit keeps the rebuild in flight. A rebuild, a cold
     // membrane of tens of iterations, takes longer than a warm frame of
     // four, so refits follow one another at the banana's end-on views.
-    let name = "orbit_ycb_banana";
-    let path = common::data_dir().join(format!("bags/robot_view/{name}.mcap"));
-    let bag = Bag::open(&path).unwrap();
-    let cfg = Config::load(None, &[]).unwrap();
-    let membranes = Membranes::new(&cfg.membrane, &cfg.pipeline).unwrap();
     let topic = "/synth/YcbBanana/points";
+    let (cfg, membranes, clouds) = frames_of("orbit_ycb_banana", topic);
     let mut tracker = Tracker::new(StreamKey::topic(topic));
     let (mut last, mut kept) = (None, 0);
-    for m in bag.read(&[topic]).unwrap() {
-        let mut sample = decode_sample(topic, &m.data, &cfg.wire, &cfg.pipeline).unwrap();
-        let cloud = sample.streams.remove(0).cloud;
+    for cloud in &clouds {
         let deadlines = Deadlines::after(Instant::now(), 60_000.0, 60_000.0);
         let r = tracker
-            .process_by(&cloud, &membranes, &cfg.pipeline, deadlines)
+            .process_by(cloud, &membranes, &cfg.pipeline, deadlines)
             .unwrap();
         let refit = matches!(r.reason, PathReason::Refit { .. });
         let started = tracker.rebuild_started();
@@ -555,21 +569,8 @@ fn a_cold_frame_starts_a_rebuild_only_when_its_deadline_cut_it_short() {
     // there would repeat it. It starts at the next warm frame instead,
     // unless the cold frame's deadline stopped its membrane early; then the
     // rebuild, which has no deadline, finishes what the frame could not.
-    let path = common::data_dir().join("bags/robot_view/turn_capsule.mcap");
-    let bag = Bag::open(&path).unwrap();
-    let cfg = Config::load(None, &[]).unwrap();
-    let membranes = Membranes::new(&cfg.membrane, &cfg.pipeline).unwrap();
     let topic = "/synth/capsule/points";
-    let clouds: Vec<_> = bag
-        .read(&[topic])
-        .unwrap()
-        .into_iter()
-        .take(2)
-        .map(|m| {
-            let sample = decode_sample(topic, &m.data, &cfg.wire, &cfg.pipeline).unwrap();
-            sample.streams.into_iter().next().unwrap().cloud
-        })
-        .collect();
+    let (cfg, membranes, clouds) = frames_of("turn_capsule", topic);
     let run = |deadlines: Deadlines| {
         let mut tracker = Tracker::new(StreamKey::topic(topic));
         let first = tracker
@@ -612,18 +613,13 @@ fn a_shape_prior_that_switches_hastens_a_rebuild_on_that_frame() {
     // turning bowl's last-third F 0.470 -> 0.552 in
     // benches/robot_view_eval.sh). Here the mug that the swap brings in is
     // completed as a solid of revolution until its handle turns into view.
-    let path = common::data_dir().join("bags/robot_view/swap.mcap");
-    let bag = Bag::open(&path).unwrap();
-    let cfg = Config::load(None, &[]).unwrap();
-    let membranes = Membranes::new(&cfg.membrane, &cfg.pipeline).unwrap();
     let topic = "/synth/rounded_box_then_bottle_then_mug/points";
+    let (cfg, membranes, clouds) = frames_of("swap", topic);
     let mut tracker = Tracker::new(StreamKey::topic(topic));
     let (mut was_completed, mut switch) = (false, None);
-    for m in bag.read(&[topic]).unwrap() {
-        let mut sample = decode_sample(topic, &m.data, &cfg.wire, &cfg.pipeline).unwrap();
-        let cloud = sample.streams.remove(0).cloud;
+    for cloud in &clouds {
         let r = tracker
-            .process_by(&cloud, &membranes, &cfg.pipeline, Deadlines::default())
+            .process_by(cloud, &membranes, &cfg.pipeline, Deadlines::default())
             .unwrap();
         if switch == Some(r.frame - 1) {
             assert_eq!(
