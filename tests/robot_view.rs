@@ -644,3 +644,43 @@ fn a_shape_prior_that_switches_hastens_a_rebuild_on_that_frame() {
     }
     panic!("no warm frame switched its completion (last {switch:?})");
 }
+
+#[test]
+fn a_one_thread_replay_gives_the_same_scores_and_ends() {
+    // `sepmem replay` makes its main thread, which runs the frames, the
+    // first worker of rayon's global pool. With one thread that worker is
+    // the only one: work handed to the global pool from another thread
+    // would wait for it forever. The background rebuilds run on pools of
+    // their own; the replay must end, and give what the default threads
+    // give (the membrane is deterministic at any thread count).
+    let name = "turn_capsule";
+    let bag = common::data_dir().join(format!("bags/robot_view/{name}.mcap"));
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sepmem"))
+        .args(["replay", bag.to_str().unwrap(), "-q"])
+        .env("RAYON_NUM_THREADS", "1")
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let limit = Instant::now() + std::time::Duration::from_secs(300);
+    while child.try_wait().unwrap().is_none() {
+        if Instant::now() > limit {
+            child.kill().unwrap();
+            panic!("a one-thread replay of {name} did not end in 300 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let one = String::from_utf8_lossy(&out.stdout).to_string();
+    let scores = |out: &str| {
+        let lines: Vec<String> = out
+            .lines()
+            .filter(|l| l.starts_with("score ") || l.starts_with("view "))
+            .map(str::to_string)
+            .collect();
+        assert_eq!(lines.len(), 2, "{out}");
+        lines
+    };
+    assert!(one.contains("30 frames ok"), "{one}");
+    assert_eq!(scores(&one), scores(&replay(name)));
+}
