@@ -38,16 +38,16 @@
 //! rim turns into view (F 0.530 → 0.476, its largest volume 1.9 → 4.6×).
 //! No other sequence changed. The pipeline now hastens a background
 //! rebuild on the frame where a completion starts or stops
-//! (`pipeline::Tracker`), and that bowl's last third scores 0.552. On the balls no completed point was ever
-//! seen through; on that bowl 3–10 % were within a few frames of its rim
-//! turning into view, while 10 % were allowed (`max_contradicted` is now
-//! 0.02). The warm chain alone does not unlearn such a ball: the drifting
-//! bowl of `tests/replay.rs` fell behind its cold references by up to 0.07
-//! without the background rebuild, and not with it (dF mean −0.008,
-//! largest +0.045). The fitted spheres missed the fused points
-//! by 0.07–0.09δ (median) on the balls and 0.11–0.17δ on that bowl; the
-//! default `max_misfit_delta` 0.25 rejects a half-ellipsoid of axes 1 : 1 :
-//! 0.7 (0.37δ).
+//! (`pipeline::Tracker`), and that bowl's last third scores 0.552. On the
+//! balls no completed point was ever seen through; on that bowl 3–10 %
+//! were within a few frames of its rim turning into view, while 10 % were
+//! allowed (`max_contradicted` is now 0.02). The warm chain alone does not
+//! unlearn such a ball: the drifting bowl of `tests/replay.rs` fell
+//! behind its cold references by up to 0.07 without the background
+//! rebuild, and not with it (dF mean −0.008, largest +0.045). The fitted
+//! spheres missed the fused points by 0.07–0.09δ (median) on the balls
+//! and 0.11–0.17δ on that bowl; the default `max_misfit_delta` 0.25
+//! rejects a half-ellipsoid of axes 1 : 1 : 0.7 (0.37δ).
 
 use super::config::SphereConfig;
 use super::solid::Admission;

@@ -849,30 +849,14 @@ impl Tracker {
             Some(_) => rebuild::Urgency::Idle,
             None => rebuild::Urgency::Awaited,
         };
-        // A cold frame cancels the rebuild in flight. Unless its deadline
-        // cut its membrane short, it starts none: that membrane ran on the
-        // model a rebuild would get (a refit's fused points, or this frame's
-        // own after a restart), and a rebuild would only repeat it on a core
-        // of its own while the next frames run. The next warm frame starts
-        // one, on a model with a view more. Measured over the 43 sequences of
-        // benches/robot_view_eval.sh (no deadline, so no cold frame was cut
-        // short): mean last-third F 0.819 either way, median 0.884 -> 0.870,
-        // volume IoU median 0.949 -> 0.951, seen side median 0.917 -> 0.918;
-        // single sequences moved by up to ±0.13, both ways (the spread any
-        // change of the rebuilds' timing gives: it moves the tracked pose by
-        // a degree or two, and F at τ = 1 % follows).
-        if final_path == StartPath::Cold && rec.report.stop != membrane::StopReason::Deadline {
-            self.rebuild = None;
-        } else {
-            // A warm frame whose model the next frame's surface must come
-            // from: a refit (the surface no longer explains the points), or
-            // a shape prior that took or dropped this frame's points (the
-            // warm surface was evolved under the other prior: a bowl that
-            // showed the camera its outside was a ball until its rim turned
-            // into view, and the warm chain kept the ball for ten frames).
-            let refit = matches!(reason, PathReason::Refit { .. });
-            let urgent = final_path == StartPath::Warm && (refit || was_completed != completed);
-            self.start_rebuild(final_path, urgent, membranes, cfg, frame, urgency);
+        // A cold frame starts no rebuild unless its deadline cut it short; a
+        // refit or a shape prior's switch hastens one (`start_rebuild`).
+        let cut_short = rec.report.stop == membrane::StopReason::Deadline;
+        let refit = matches!(reason, PathReason::Refit { .. });
+        let urgent = final_path == StartPath::Warm && (refit || was_completed != completed);
+        match final_path {
+            StartPath::Cold if !cut_short => self.rebuild = None,
+            _ => self.start_rebuild(final_path, urgent, membranes, cfg, frame, urgency),
         }
         // The published mesh without the centring's curvature bias; the
         // alignment above and the next warm start keep the surface's own.
@@ -952,15 +936,33 @@ impl Tracker {
     }
 
     /// After the frame, start the next background rebuild when none is in
-    /// flight, on the pool of its `urgency`. A cold frame first drops the
-    /// one in flight: its model restarted, or a refit just rebuilt it. An
-    /// `urgent` warm frame (a refit, [`RefitPath::Background`], or a shape
-    /// prior's switch) replaces it by one on this frame's model that the
-    /// next frame adopts, unless it is such a one already: with a deadline
-    /// a frame adopts a rebuild only once it is done, and replacing it at
-    /// every refit starved the live node's refits (`sepmem replay
-    /// --realtime` of the orbited YCB banana: 18 refits in a row from frame
-    /// 12, none adopted).
+    /// flight, on the pool of its `urgency`.
+    ///
+    /// A cold frame drops the one in flight: its model restarted, or a
+    /// refit just rebuilt it. It is called for a cold frame only when the
+    /// frame's deadline cut its membrane short; otherwise that membrane ran
+    /// on the model a rebuild would get (a refit's fused points, or this
+    /// frame's own after a restart), and a rebuild would only repeat it on
+    /// a core of its own while the next frames run, so the next warm frame
+    /// starts one, on a model with a view more. Measured over the 43
+    /// sequences of `benches/robot_view_eval.sh` (no deadline, so no cold
+    /// frame was cut short): mean last-third F 0.819 either way, median
+    /// 0.884 -> 0.870, volume IoU median 0.949 -> 0.951, seen side median
+    /// 0.917 -> 0.918; single sequences moved by up to ±0.13 both ways, the
+    /// spread any change of the rebuilds' timing gives (it moves the tracked
+    /// pose by a degree or two, and F at τ = 1 % follows).
+    ///
+    /// An `urgent` warm frame replaces it by one on this frame's model that
+    /// the next frame adopts: a refit ([`RefitPath::Background`]: the
+    /// surface no longer explains the points), or a shape prior that took
+    /// or dropped this frame's points, whose warm surface was evolved under
+    /// the other prior (a bowl that showed the camera its outside was a
+    /// ball until its rim turned into view, and the warm chain kept the
+    /// ball for ten frames). It does not replace one that is such a one
+    /// already: with a deadline a frame adopts a rebuild only once it is
+    /// done, and replacing it at every refit starved the live node's refits
+    /// (`sepmem replay --realtime` of the orbited YCB banana: 18 refits in a
+    /// row from frame 12, none adopted).
     fn start_rebuild(
         &mut self,
         path: StartPath,
