@@ -148,9 +148,16 @@ impl Ball {
         sum.norm() / points.len().max(1) as f64
     }
 
-    /// About `4πr²/step²` points evenly on the sphere (a Fibonacci lattice).
+    /// `4πr²/step²`: about how many points [`Self::lattice`] puts on the
+    /// sphere.
+    fn lattice_size(&self, step: f64) -> f64 {
+        4.0 * std::f64::consts::PI * (self.radius / step).powi(2)
+    }
+
+    /// About [`Self::lattice_size`] points evenly on the sphere (a
+    /// Fibonacci lattice).
     fn lattice(&self, step: f64) -> impl Iterator<Item = Vec3> + '_ {
-        let n = (4.0 * std::f64::consts::PI * (self.radius / step).powi(2)).ceil() as usize;
+        let n = self.lattice_size(step).ceil() as usize;
         let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
         let n = n.max(8);
         (0..n).map(move |i| {
@@ -197,7 +204,7 @@ pub fn complete(
         cap: cfg.max_added * points.len() as f64,
     };
     // The lattice's size bounds the work before the admission counts it.
-    if 4.0 * std::f64::consts::PI * (ball.radius / delta).powi(2) > 2.0 * admission.cap {
+    if ball.lattice_size(delta) > 2.0 * admission.cap {
         return None;
     }
     let added = admission.admit(ball.lattice(delta), index, free)?;
