@@ -234,6 +234,16 @@ where
     (n > 0).then(|| sum / n as f64)
 }
 
+/// The upper median of non-empty `values` (the upper one of the middle
+/// pair), reordering them in place. The completions' profile rings, axis
+/// tilt and misfits (`membrane::revolution`, `membrane::sphere`) use it, not
+/// [`median_of`], which averages the middle pair: with that the 39
+/// sequences' median last-third F read 0.807, not 0.840.
+pub(crate) fn upper_median(values: &mut [f64]) -> f64 {
+    let mid = values.len() / 2;
+    *values.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
 /// Median of a non-empty slice (mean of the middle pair for even lengths); 0 for empty.
 pub(crate) fn median_of(values: &[f64]) -> f64 {
     if values.is_empty() {

@@ -135,7 +135,7 @@ impl Ball {
             .iter()
             .map(|p| ((p - self.centre).norm() - self.radius).abs())
             .collect();
-        super::revolution::upper_median(&mut off)
+        crate::density::upper_median(&mut off)
     }
 
     /// The length of the mean unit direction from the centre to `points`:
