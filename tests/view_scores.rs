@@ -194,8 +194,29 @@ fn replay_prints_every_view_score_per_frame_and_per_third() {
     }
     // The replay's own summary lines are still there, as the other tests parse them.
     assert!(out.contains("summary: 30 samples, 30 frames ok"), "{out}");
+    let score = out
+        .lines()
+        .find(|l| l.starts_with(&format!("score {STREAM}: 30 frames; F mean ")))
+        .unwrap_or_else(|| panic!("no score summary in {out}"));
+    // The per-frame volume ratio (the closure's "no frame above 1.3x") is
+    // the one the score line's extremes come from.
+    let vol = column(header, "vol");
+    let vols: Vec<f64> = out
+        .lines()
+        .filter(|l| l.starts_with(STREAM))
+        .map(|l| l.split_whitespace().nth(vol).unwrap().parse().unwrap())
+        .collect();
+    assert!(vols.iter().all(|v| v.is_finite() && *v > 0.0), "{vols:?}");
+    let largest = vols.iter().copied().fold(f64::MIN, f64::max);
+    let summary_max: f64 = score
+        .split("volume ratio min ")
+        .nth(1)
+        .and_then(|r| r.split(" max ").nth(1))
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no volume ratio in {score}"));
     assert!(
-        out.contains(&format!("score {STREAM}: 30 frames; F mean ")),
-        "{out}"
+        (largest - summary_max).abs() <= 0.006,
+        "{largest} vs {score}"
     );
 }

@@ -15,8 +15,8 @@
 //! written by `sepmem synth`), every frame of every stream is scored against
 //! the posed ground-truth mesh ([`sepmem::eval`]): F-score,
 //! Chamfer-L1, precision against the full surface, recall on the part the
-//! camera saw, and the closure of the unseen side (extent along the viewing
-//! ray); the summary gives per-stream means and minima. The robot's-view
+//! camera saw, the closure of the unseen side (`depth`: extent along the
+//! viewing ray) and `vol`, the mesh's volume over the true solid's; the summary gives per-stream means and minima. The robot's-view
 //! scores of [`sepmem::eval::view`] follow at the end of each row (`seen`
 //! side depth accuracy, `rim`: the same on the silhouette's rim alone,
 //! volume `IoU` with the true solid, `rot` (°) and
@@ -284,8 +284,8 @@ pub fn run_opts(
     );
     if scored {
         header += &format!(
-            " {:>6} {:>6} {:>6} {:>7} {:>5}",
-            "F", "P", "R_vis", "CD", "depth"
+            " {:>6} {:>6} {:>6} {:>7} {:>5} {:>5}",
+            "F", "P", "R_vis", "CD", "depth", "vol"
         );
     }
     if opts.compare_cold {
@@ -365,15 +365,19 @@ pub fn run_opts(
                     if let Some(sc) = &score {
                         entry.scores.push(*sc);
                         line += &format!(
-                            " {:>6.3} {:>6.3} {:>6.3} {:>7.4} {:>5.2}",
+                            " {:>6.3} {:>6.3} {:>6.3} {:>7.4} {:>5.2} {:>5.2}",
                             sc.fscore,
                             sc.precision,
                             sc.recall_visible,
                             sc.chamfer_l1,
-                            sc.depth_ratio
+                            sc.depth_ratio,
+                            sc.volume_ratio
                         );
                     } else if scored {
-                        line += &format!(" {:>6} {:>6} {:>6} {:>7} {:>5}", "-", "-", "-", "-", "-");
+                        let dash = "-";
+                        line += &format!(
+                            " {dash:>6} {dash:>6} {dash:>6} {dash:>7} {dash:>5} {dash:>5}"
+                        );
                     }
                     if opts.compare_cold {
                         let refs = cold_references(
