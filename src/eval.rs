@@ -325,8 +325,10 @@ pub fn cold_references(
         .map(|k| {
             let thinned = crate::pipeline::thinned_subset(cloud, pipeline, k);
             let mut rec = membrane.reconstruct(&thinned, &budget, &crate::membrane::Start::Cold)?;
-            // As the pipeline publishes its frames (`membrane.step.unbias`).
+            // As the pipeline publishes its frames (`membrane.step.unbias`,
+            // `pipeline.snap`).
             rec.unbias_mesh();
+            crate::pipeline::snap::apply(&mut rec, &cloud.points, false, pipeline.snap.as_ref());
             Ok(rec)
         })
         .collect()

@@ -43,6 +43,7 @@ pub mod engine;
 pub mod objects;
 pub mod outputs;
 pub mod rebuild;
+pub mod snap;
 
 pub use crate::stream::StreamKey;
 
@@ -124,6 +125,9 @@ pub struct PipelineConfig {
     /// background, and a later warm frame starts from its surface
     /// ([`rebuild`]); `None` (null): the warm chain alone.
     pub rebuild: Option<rebuild::RebuildConfig>,
+    /// The published mesh's seen side moved onto the frame's points
+    /// ([`snap`]); `None` (null): the membrane's surface as it is.
+    pub snap: Option<snap::SnapConfig>,
     /// `membrane.prepare.density_sample` of warm-started frames (0: the membrane's own).
     pub warm_density_sample: usize,
     /// Marker namespace.
@@ -169,6 +173,7 @@ impl Default for PipelineConfig {
             }),
             model_icp: Some(ModelIcpConfig::default()),
             rebuild: Some(rebuild::RebuildConfig::default()),
+            snap: Some(snap::SnapConfig::default()),
             warm_density_sample: 256,
             marker_namespace: "sepmem".into(),
             score_samples: 10_000,
@@ -861,6 +866,13 @@ impl Tracker {
         // The published mesh without the centring's curvature bias; the
         // alignment above and the next warm start keep the surface's own.
         rec.unbias_mesh();
+        // Its seen side on the frame's own points (`pipeline.snap`).
+        snap::apply(
+            &mut rec,
+            &raw.points,
+            self.fused.is_some(),
+            cfg.snap.as_ref(),
+        );
         Ok(FrameResult {
             stream: self.key.clone(),
             frame,
