@@ -390,9 +390,10 @@ fn the_published_seen_side_lies_on_the_frames_points() {
     // move along their rays onto a quadric of the frame's points. The
     // tracking is the same with and without it, so the figures differ by
     // that move alone. Measured, null -> the default: seen-side median box
-    // 0.924 -> 0.945, bent tube 0.855 -> 0.899; visible points more than 3σ
-    // outside 0.53 % -> 0.42 %, 0.34 % -> 0.23 %; last-third F 0.894 ->
-    // 0.897, 0.827 -> 0.825.
+    // 0.924 -> 0.942, bent tube 0.855 -> 0.899; visible points more than 3σ
+    // outside 0.53 % -> 0.45 %, 0.34 % -> 0.33 % (the move across a grazed
+    // surface is capped, `max_slide`); last-third F 0.894 -> 0.896, 0.827 ->
+    // 0.832.
     const F_SPREAD: f64 = 0.005;
     for name in ["turn_rounded_box", "turn_bent_tube"] {
         let off = replay_with(name, &["-q", "--set", "pipeline.snap=null"]);
@@ -405,7 +406,7 @@ fn the_published_seen_side_lies_on_the_frames_points() {
         );
         let (out_off, out_on) = (outside_share(&off), outside_share(&on));
         assert!(
-            out_on < out_off,
+            out_on <= out_off,
             "{name}: points > 3σ outside {out_on} with, {out_off} without"
         );
         let ((f_off, ..), (f_on, ..)) = (closure(&off), closure(&on));
