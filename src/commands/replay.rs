@@ -16,9 +16,10 @@
 //! the posed ground-truth mesh ([`sepmem::eval`]): F-score,
 //! Chamfer-L1, precision against the full surface, recall on the part the
 //! camera saw, the closure of the unseen side (`depth`: extent along the
-//! viewing ray) and `vol`, the mesh's volume over the true solid's; the summary gives per-stream means and minima. The robot's-view
-//! scores of [`sepmem::eval::view`] follow at the end of each row (`seen`
-//! side depth accuracy, `rim`: the same on the silhouette's rim alone,
+//! viewing ray) and `vol`, the mesh's volume over the true solid's; the
+//! summary gives per-stream means and minima. The robot's-view scores of
+//! [`sepmem::eval::view`] follow at the end of each row (`seen` side depth
+//! accuracy, `rim`: the same on the silhouette's rim alone,
 //! volume `IoU` with the true solid, `rot` (°) and
 //! `tr_mm` error of the tracked pose, `cover`: share of the true surface
 //! seen so far, `out3s`: share of the points on the true surface that lie

@@ -220,8 +220,8 @@ struct PointImage {
 }
 
 impl PointImage {
-    /// The image of `points` from `eye`, with bins of a half `radius` at
-    /// the points' centroid; `None` when no point lies in front of the
+    /// The image of `points` from `eye`, with bins of `radius` over
+    /// [`BINS_PER_RADIUS`] at the points' centroid; `None` when no point lies in front of the
     /// eye or the image would be too large.
     fn new(points: &[Vec3], eye: Vec3, radius: f64) -> Option<Self> {
         let finite = points.iter().filter(|p| p.iter().all(|x| x.is_finite()));
