@@ -367,11 +367,25 @@ fn complete_fused_cloud(
 ) -> (usize, Option<Solid>) {
     let (added, solid) = complete_as_solid(cfg, free, delta, points);
     d_used.resize(points.len(), delta);
+    let solid = solid.or_else(|| fused_back(cfg, free, delta, points));
     let added = match &cfg.view.fused_completion {
         Some(fc) if added == 0 => complete_fused(free, fc, delta, points, d_used),
         _ => added,
     };
     (added, solid)
+}
+
+/// The bound on the unseen side's depth of a fused cloud that no solid
+/// completes (`view.back`, [`view::BackBound`]), seen from its latest
+/// view's camera.
+fn fused_back(
+    cfg: &MembraneConfig,
+    free: &dyn view::FreeSpace,
+    delta: f64,
+    points: &[Vec3],
+) -> Option<Solid> {
+    let (back, eye) = (cfg.view.back.as_ref()?, free.latest_eye()?);
+    view::BackBound::of(points, eye, delta, back.extent).map(Solid::Back)
 }
 
 /// The completion of a fused cloud as a solid of revolution, else as a

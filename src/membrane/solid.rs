@@ -9,6 +9,11 @@
 //! its margin, the inward force acts as in space seen empty. Measured on
 //! the bottles of the 39 sequences: their largest volume ratio 1.86–1.94 →
 //! 1.26–1.44 ([`super::revolution`]).
+//!
+//! A fused cloud that no solid completes may still have its unseen side's
+//! depth bounded along the latest view (`membrane.view.back`,
+//! [`super::view::BackBound`]): beyond that bound the inward force acts in
+//! the same way.
 
 use super::view::FreeSpace;
 use crate::cloud::Vec3;
@@ -59,6 +64,9 @@ pub enum Solid {
     Revolution(super::revolution::Solid),
     /// A ball ([`super::sphere`]), and the margin beyond its sphere.
     Ball(super::sphere::Ball, f64),
+    /// No completed solid, but a bound on the depth of the unseen side
+    /// (`membrane.view.back`, [`super::view::BackBound`]).
+    Back(super::view::BackBound),
 }
 
 impl Solid {
@@ -67,6 +75,7 @@ impl Solid {
         match self {
             Self::Revolution(s) => s.is_beyond(p),
             Self::Ball(b, margin) => (p - b.centre).norm() > b.radius + margin,
+            Self::Back(b) => b.is_beyond(p),
         }
     }
 }

@@ -47,7 +47,11 @@
 //!    ratio falls (bottle turn 2.55 → 1.56, bottle orbit 4.67 → 1.36, median
 //!    1.67 → 1.45) but the last third's median F falls 0.266 → 0.242 and the
 //!    seen-side median 0.738 → 0.679 (the warm start then tracks worse), so
-//!    it stays off until tracking no longer drifts.
+//!    it stays off until tracking no longer drifts. A fused cloud (5.) that
+//!    no solid completes gets the same bound ([`BackBound`]), seen from its
+//!    latest view's camera, with `V` the depth of all its fused points along
+//!    that view: the sides earlier views saw count (its measurement, a trade
+//!    of fewer phantom lobes for lower F, is in `launch/sepmem.json5`).
 //! 5. **Fused views** ([`FreeSpace`]). A cloud fused from many views (the
 //!    tracker's per-object model) is no single view, but the caller knows
 //!    where its views saw through; given that, the inward force acts only
@@ -237,31 +241,9 @@ impl ViewBuffer {
         }
     }
 
-    /// The seen extent of `points` (robust: the 0.2 % and 99.8 % quantiles,
-    /// so a few stray points do not define it, where a wide trim would
-    /// shrink it); `None` for fewer than 8 points.
+    /// The seen extent of `points` in this view ([`seen_extent`]).
     fn extent(&self, points: &[Vec3]) -> Option<SeenExtent> {
-        let n = points.len();
-        if n < 8 {
-            return None;
-        }
-        let quantiles = |mut v: Vec<f64>| -> (f64, f64) {
-            let lo_i = (0.002 * (n - 1) as f64) as usize;
-            let hi_i = (0.998 * (n - 1) as f64).ceil() as usize;
-            let (_, lo, _) = v.select_nth_unstable_by(lo_i, f64::total_cmp);
-            let lo = *lo;
-            let (_, hi, _) = v.select_nth_unstable_by(hi_i, f64::total_cmp);
-            (lo, *hi)
-        };
-        let f = self.frame();
-        let (front, deepest) = quantiles(points.iter().map(|p| f.depth(p)).collect());
-        let (u0, u1) = quantiles(points.iter().map(|p| f.lateral(p)[0]).collect());
-        let (w0, w1) = quantiles(points.iter().map(|p| f.lateral(p)[1]).collect());
-        Some(SeenExtent {
-            front,
-            visible: deepest - front,
-            lateral: (u1 - u0).min(w1 - w0),
-        })
+        seen_extent(self.frame(), points)
     }
 
     /// The mirrored completion of `points` (see the module docs): the mirror
@@ -291,13 +273,69 @@ impl ViewBuffer {
     /// `points` (nor deeper than an earlier back).
     pub fn bound_back(&mut self, points: &[Vec3], extent: f64) {
         if let Some(e) = self.extent(points) {
-            let bound = e.front + extent * e.visible.max(e.lateral) + self.margin;
-            self.back = self.back.min(bound);
+            self.back = self.back.min(e.back(extent) + self.margin);
         }
     }
 }
 
-/// How far a single view's points reach, in the view's frame.
+/// The back bound of a fused cloud (module docs, 4.), seen from its
+/// latest view's camera: nothing of the object lies deeper than
+/// `z₀ + extent · max(V, min(Lᵤ, L_w))` of all its points along that
+/// view's direction (plus the visibility margin), where V now spans every
+/// side the views have seen. Beyond it the inward force acts as in space
+/// seen empty ([`super::solid::Solid::Back`]).
+#[derive(Debug, Clone, Copy)]
+pub struct BackBound {
+    frame: ViewFrame,
+    back: f64,
+}
+
+impl BackBound {
+    /// The bound of `points` seen from `eye` with spacing `delta`; `None`
+    /// for fewer than 8 points or a degenerate geometry.
+    pub fn of(points: &[Vec3], eye: Vec3, delta: f64, extent: f64) -> Option<Self> {
+        if points.is_empty() || !(delta > 0.0 && delta.is_finite()) {
+            return None;
+        }
+        let centroid = points.iter().sum::<Vec3>() / points.len() as f64;
+        let frame = ViewFrame::looking_at(eye, centroid)?;
+        let back = seen_extent(&frame, points)?.back(extent) + MARGIN_DELTA * delta;
+        back.is_finite().then_some(Self { frame, back })
+    }
+
+    /// True when `p` lies deeper than the bound.
+    pub fn is_beyond(&self, p: &Vec3) -> bool {
+        self.frame.depth(p) > self.back
+    }
+}
+
+/// The seen extent of `points` in `frame` (robust: the 0.2 % and 99.8 %
+/// quantiles, so a few stray points do not define it, where a wide trim
+/// would shrink it); `None` for fewer than 8 points.
+fn seen_extent(frame: &ViewFrame, points: &[Vec3]) -> Option<SeenExtent> {
+    let n = points.len();
+    if n < 8 {
+        return None;
+    }
+    let quantiles = |mut v: Vec<f64>| -> (f64, f64) {
+        let lo_i = (0.002 * (n - 1) as f64) as usize;
+        let hi_i = (0.998 * (n - 1) as f64).ceil() as usize;
+        let (_, lo, _) = v.select_nth_unstable_by(lo_i, f64::total_cmp);
+        let lo = *lo;
+        let (_, hi, _) = v.select_nth_unstable_by(hi_i, f64::total_cmp);
+        (lo, *hi)
+    };
+    let (front, deepest) = quantiles(points.iter().map(|p| frame.depth(p)).collect());
+    let (u0, u1) = quantiles(points.iter().map(|p| frame.lateral(p)[0]).collect());
+    let (w0, w1) = quantiles(points.iter().map(|p| frame.lateral(p)[1]).collect());
+    Some(SeenExtent {
+        front,
+        visible: deepest - front,
+        lateral: (u1 - u0).min(w1 - w0),
+    })
+}
+
+/// How far a view's points reach, in the view's frame.
 struct SeenExtent {
     /// Depth of the front (z₀).
     front: f64,
@@ -305,6 +343,13 @@ struct SeenExtent {
     visible: f64,
     /// The smaller lateral extent, min(Lᵤ, L_w).
     lateral: f64,
+}
+
+impl SeenExtent {
+    /// The back bound `z₀ + extent · max(V, min(Lᵤ, L_w))` (module docs, 4.).
+    fn back(&self, extent: f64) -> f64 {
+        self.front + extent * self.visible.max(self.lateral)
+    }
 }
 
 /// Whether `p` is outside the object, for the inward force: the occupancy
@@ -612,6 +657,27 @@ mod tests {
         wide.bound_back(&cap, 1.5);
         assert!(!wide.is_beyond_back(&behind(1.3 * r)));
         assert!(wide.is_beyond_back(&behind(2.3 * r)));
+    }
+
+    #[test]
+    fn a_fused_clouds_back_bound_spans_every_side_seen() {
+        let (c, r, delta, cap, _) = sphere_cap_view();
+        let behind = |dz: f64| Vec3::new(0.0, 0.0, c.z + dz);
+        // The latest view's front cap alone: its back at the true back.
+        let b = BackBound::of(&cap, Vec3::zeros(), delta, 1.0).unwrap();
+        assert!(!b.is_beyond(&behind(0.9 * r)));
+        assert!(b.is_beyond(&behind(1.3 * r)));
+        assert!(!b.is_beyond(&behind(-0.9 * r)));
+        // An earlier view saw a tail 3r deep: the fused points' depth, not
+        // the latest view's alone, bounds the back.
+        let mut fused = cap.clone();
+        fused.extend((0..400).map(|i| behind(r * (1.0 + 2.0 * f64::from(i) / 399.0))));
+        let b = BackBound::of(&fused, Vec3::zeros(), delta, 1.0).unwrap();
+        assert!(!b.is_beyond(&behind(2.9 * r)));
+        assert!(b.is_beyond(&behind(4.5 * r)));
+        // Degenerate input gives no bound.
+        assert!(BackBound::of(&cap[..7], Vec3::zeros(), delta, 1.0).is_none());
+        assert!(BackBound::of(&cap, Vec3::zeros(), f64::NAN, 1.0).is_none());
     }
 
     #[test]
