@@ -669,8 +669,8 @@ impl Default for FusedCompletionConfig {
 /// `membrane.view.back`: nothing of a single view's object lies deeper than
 /// `z₀ + extent · max(V, min(Lᵤ, L_w))` behind its seen front `z₀` (`V` the
 /// visible depth, `Lᵤ, L_w` the lateral extents); nor, for a fused cloud
-/// that no solid completes, along its latest view, `V` then the depth of
-/// all its fused points ([`super::view::BackBound`]).
+/// whose carving no completed solid bounds, along its latest view, `V`
+/// then the depth of all its fused points ([`super::view::BackBound`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BackConfig {

@@ -375,9 +375,10 @@ fn complete_fused_cloud(
     (added, solid)
 }
 
-/// The bound on the unseen side's depth of a fused cloud that no solid
-/// completes (`view.back`, [`view::BackBound`]), seen from its latest
-/// view's camera.
+/// The bound on the unseen side's depth of a fused cloud whose carving no
+/// completed solid bounds (none completes it, or its `carve_delta` is
+/// null): `view.back`, [`view::BackBound`], seen from its latest view's
+/// camera.
 fn fused_back(
     cfg: &MembraneConfig,
     free: &dyn view::FreeSpace,

@@ -10,8 +10,8 @@
 //! the bottles of the 39 sequences: their largest volume ratio 1.86–1.94 →
 //! 1.26–1.44 ([`super::revolution`]).
 //!
-//! A fused cloud that no solid completes may still have its unseen side's
-//! depth bounded along the latest view (`membrane.view.back`,
+//! A fused cloud whose carving no completed solid bounds may still have
+//! its unseen side's depth bounded along the latest view (`membrane.view.back`,
 //! [`super::view::BackBound`]): beyond that bound the inward force acts in
 //! the same way.
 

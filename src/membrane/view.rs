@@ -47,8 +47,8 @@
 //!    ratio falls (bottle turn 2.55 → 1.56, bottle orbit 4.67 → 1.36, median
 //!    1.67 → 1.45) but the last third's median F falls 0.266 → 0.242 and the
 //!    seen-side median 0.738 → 0.679 (the warm start then tracks worse), so
-//!    it stays off until tracking no longer drifts. A fused cloud (5.) that
-//!    no solid completes gets the same bound ([`BackBound`]), seen from its
+//!    it stays off until tracking no longer drifts. A fused cloud (5.) whose
+//!    carving no completed solid bounds gets the same bound ([`BackBound`]), seen from its
 //!    latest view's camera, with `V` the depth of all its fused points along
 //!    that view: the sides earlier views saw count (its measurement, a trade
 //!    of fewer phantom lobes for lower F, is in `launch/sepmem.json5`).
