@@ -60,9 +60,14 @@
 //! (cosine within [`CONTOUR_COS`]) and that no fit moved moves outward across
 //! its ray by `offset` times the frame's point spacing ([`point_spacing`]).
 //! Over the 43 sequences, { offset: 0.4 } against null: seen-side median
-//! 0.936 → 0.943 (mean 0.910 → 0.916), higher on all 43; mean last-third F
-//! 0.8241 → 0.8231, visible points > 3σ outside unchanged. 0.5 (half a
-//! pixel): 0.945, but mean F 0.818. Moving contour vertices onto the
+//! 0.936 → 0.940 (mean 0.910 → 0.914), higher on 42 of 43 (the turning YCB
+//! banana −0.001); mean last-third F 0.8241 → 0.8248, visible points > 3σ
+//! outside unchanged (median share 0.34 %); but the meshes grow: sequences
+//! with a frame above 1.5× the true volume 7 → 11 (the bent tubes' largest
+//! ratio 1.46–1.58 → 1.48–1.61). With the band reaching cosine −0.3 (behind
+//! the contour): seen side 0.943, mean F 0.8231 (capsules −0.03 to −0.05),
+//! 13 above 1.5×; offset 0.5 there (half a pixel): 0.945, mean F 0.818.
+//! Moving contour vertices onto the
 //! outermost points of their windows instead turned the misses into hits in
 //! front of the true depth (the box 0.942 → 0.938). Like
 //! `membrane.step.unbias`, only the
@@ -241,7 +246,7 @@ fn point_spacing(fits: &[(usize, f64, f64, f64, f64)], radius: f64) -> f64 {
 
 /// Cosines between a vertex's normal and its ray to the eye within which
 /// the vertex lies on the contour ([`move_contour`]).
-const CONTOUR_COS: (f64, f64) = (-0.3, 0.05);
+const CONTOUR_COS: (f64, f64) = (-0.1, 0.05);
 
 /// Move each vertex of `mesh` on its contour seen from `eye` (its normal
 /// within [`CONTOUR_COS`] of square to its ray) and not moved yet, outward
@@ -507,7 +512,7 @@ mod tests {
                 // most 53° from square to the rays): on the sphere.
                 worst_front = worst_front.max(((v - c).norm() - r).abs());
             } else if w.z > c.z + 0.5 * r {
-                // Behind the contour (whose vertices, up to 0.3 r behind the
+                // Behind the contour (whose vertices, up to 0.1 r behind the
                 // equator, move out).
                 assert_eq!(v, w, "a back vertex moved");
             }
