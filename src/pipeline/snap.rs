@@ -193,22 +193,8 @@ pub fn snap_seen_side(
     };
     let normals = mesh.vertex_normals();
     let max_move = cfg.max_move_delta.get() * delta;
-    let mut window = Vec::new();
-    let fits: Vec<(usize, f64, f64, f64, f64)> = (mesh.vertices.iter().zip(&normals).enumerate())
-        .filter(|(_, (v, n))| n.dot(&(eye - **v)) > 0.0)
-        .filter_map(|(i, (v, _))| {
-            let (uv, depth) = image.frame.project(v)?;
-            image.window(uv, &mut window);
-            let points = window.iter().map(|b| b[0]).sum::<f64>();
-            if points < min_points as f64 || window.len() < MIN_BINS {
-                return None;
-            }
-            let (fit, rms) = quadric_depth(&window)?;
-            let keep = (fit - depth).abs() <= max_move && fit > 0.0;
-            keep.then_some((i, fit, depth, rms, points))
-        })
-        .collect();
-    let mut residuals: Vec<f64> = fits.iter().map(|f| f.3).collect();
+    let fits = fit_windows(mesh, &normals, &image, eye, min_points, max_move);
+    let mut residuals: Vec<f64> = fits.iter().map(|f| f.rms).collect();
     if residuals.is_empty() {
         return 0;
     }
@@ -217,14 +203,15 @@ pub fn snap_seen_side(
     let before = mesh.vertices.clone();
     let mut moved = vec![false; before.len()];
     let spacing = point_spacing(&fits, radius);
-    for (i, fit, depth, _, _) in fits.into_iter().filter(|f| f.3 <= bound) {
-        let v = &mut mesh.vertices[i];
-        let d = (*v - eye) * (fit / depth - 1.0);
+    for f in fits.into_iter().filter(|f| f.rms <= bound) {
+        let v = &mut mesh.vertices[f.vertex];
+        let d = (*v - eye) * (f.fitted / f.depth - 1.0);
         // A ray that grazes the surface moves its vertex mostly across it.
-        let slide = (d - normals[i] * normals[i].dot(&d)).norm();
-        let cap = cfg.max_slide.get() * edge[i];
+        let n = normals[f.vertex];
+        let slide = (d - n * n.dot(&d)).norm();
+        let cap = cfg.max_slide.get() * edge[f.vertex];
         *v += if slide > cap { d * (cap / slide) } else { d };
-        moved[i] = true;
+        moved[f.vertex] = true;
     }
     if let Some(c) = &cfg.contour {
         let offset = c.offset.get() * spacing / image.scale;
@@ -234,13 +221,60 @@ pub fn snap_seen_side(
     moved.iter().filter(|&&m| m).count()
 }
 
+/// A facing vertex's window of points and the depth its quadric gives.
+struct Fit {
+    vertex: usize,
+    /// The quadric's depth at the vertex's ray.
+    fitted: f64,
+    /// The vertex's own depth.
+    depth: f64,
+    /// The fit's RMS residual.
+    rms: f64,
+    /// The points in the window.
+    points: f64,
+}
+
+/// The quadric fits of the windows of the vertices of `mesh` that face
+/// `eye` (with `normals`): those with at least `min_points` points in
+/// [`MIN_BINS`] bins whose fitted depth is positive and within `max_move`.
+fn fit_windows(
+    mesh: &TriMesh,
+    normals: &[Vec3],
+    image: &PointImage,
+    eye: Vec3,
+    min_points: usize,
+    max_move: f64,
+) -> Vec<Fit> {
+    let mut window = Vec::new();
+    (mesh.vertices.iter().zip(normals).enumerate())
+        .filter(|(_, (v, n))| n.dot(&(eye - **v)) > 0.0)
+        .filter_map(|(vertex, (v, _))| {
+            let (uv, depth) = image.frame.project(v)?;
+            image.window(uv, &mut window);
+            let points = window.iter().map(|b| b[0]).sum::<f64>();
+            if points < min_points as f64 || window.len() < MIN_BINS {
+                return None;
+            }
+            let (fitted, rms) = quadric_depth(&window)?;
+            let keep = (fitted - depth).abs() <= max_move && fitted > 0.0;
+            keep.then_some(Fit {
+                vertex,
+                fitted,
+                depth,
+                rms,
+                points,
+            })
+        })
+        .collect()
+}
+
 /// The frame's point spacing at the image's reference depth: the median,
 /// over the fitted windows (of `radius`), of `√(πr²/n)` for a window of `n`
 /// points. On the 480×360 (f = 393.75) camera at 1 m: 2.45 mm, the pixel
 /// pitch being 2.54 mm.
-fn point_spacing(fits: &[(usize, f64, f64, f64, f64)], radius: f64) -> f64 {
+fn point_spacing(fits: &[Fit], radius: f64) -> f64 {
     let area = std::f64::consts::PI * radius * radius;
-    let mut spacing: Vec<f64> = fits.iter().map(|f| (area / f.4).sqrt()).collect();
+    let mut spacing: Vec<f64> = fits.iter().map(|f| (area / f.points).sqrt()).collect();
     crate::density::upper_median(&mut spacing)
 }
 
