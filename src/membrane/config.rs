@@ -122,9 +122,8 @@ pub struct LocalSpacingConfig {
     /// local spacing is taken (their median).
     pub neighbours: usize,
     /// A point's spacing grows only where its neighbourhood is sparser than
-    /// the reference `m` (the neighbourhood medians' value at the quantile
-    /// δ comes from) by more than this factor (≥ 1), and by the excess:
-    /// `δ_i = δ · max(1, m_i / (tolerance · m))`.
+    /// the cloud's median by more than this factor (≥ 1), and by the
+    /// excess: `δ_i = δ · max(1, m_i / (tolerance · m))`.
     pub tolerance: f64,
 }
 

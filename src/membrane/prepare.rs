@@ -259,12 +259,10 @@ pub(crate) fn prepare<'a>(
     };
     // A single view, and a fused cloud with its views' free space, keep
     // the median (membrane.prepare.delta_quantile's note).
-    // `at`: the quantile of the d_i that δ comes from.
-    let (delta, at) = if view.is_some() || free.is_some() {
-        (median, 0.5)
+    let delta = if view.is_some() || free.is_some() {
+        median
     } else {
-        let q = quantile(&mut d_order, p.delta_quantile, scale);
-        ((q * p.delta_scale).max(1e-9 * scale), p.delta_quantile)
+        (quantile(&mut d_order, p.delta_quantile, scale) * p.delta_scale).max(1e-9 * scale)
     };
     // Per-point d_i of the used points (the sampled density knows only δ).
     let exact = d_kept.len() == points.len();
@@ -282,7 +280,7 @@ pub(crate) fn prepare<'a>(
         .local_spacing
         .as_ref()
         .filter(|_| exact && p.search_delta == SearchDelta::Global && !weighted(cfg))
-        .map(|l| super::spacing::local_spacing(&points, &d_used, delta, at, l));
+        .map(|l| super::spacing::local_spacing(&points, &d_used, delta, l));
     // Weighted mode (paper Eq. 9): the attribute channels of the used points.
     let attributes = if !weighted(cfg) {
         None

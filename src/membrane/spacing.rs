@@ -19,13 +19,10 @@
 //! δ_i = δ · max(1, m_i / (t · m))
 //! ```
 //!
-//! with δ the global spacing, `m_i` the median of the `d_i` of the point's
-//! `neighbours` nearest points (itself included), `m` the value of the
-//! `m_i` at the quantile of the `d_i` that δ is taken at (`delta_quantile`
-//! for a whole object, the median for a single view or a fused cloud) and
-//! `t ≥ 1` the `tolerance`: the global δ scaled by how much sparser the
-//! point's neighbourhood is than the neighbourhoods δ describes, never
-//! below δ. The search
+//! with δ the global spacing, `m` the median of all `d_i`, `m_i` the
+//! median of the `d_i` of the point's `neighbours` nearest points (itself
+//! included) and `t ≥ 1` the `tolerance`: the global δ scaled by how much sparser the point's
+//! neighbourhood is than the cloud's typical one, never below δ. The search
 //! then takes δ_R as the mean of `δ_i` over the points of `R` (the form of
 //! Eq. 6). On a uniformly sampled surface `m_i ≈ m`, so δ_R stays close to
 //! the global δ and today's calibration holds; where the density falls, δ_R
@@ -49,26 +46,10 @@
 //! |---|---|---|
 //! | off | 0.636 / 0.531 | — |
 //! | 1.0 | 0.930 / 0.806 | −0.0066 (surface outliers, genus > 0: the mug −0.025) … +0.0034 |
-//! | 1.25 | 0.916 / 0.802 | −0.0018 … +0.0047 |
+//! | **1.25** (default) | 0.916 / 0.802 | −0.0018 … +0.0047 |
 //! | 1.5 | 0.897 / 0.742 | −0.0014 … +0.0047 |
 //!
-//! (uniform original: 0.948 / 0.857). Those rows took `m` as the median of
-//! all `d_i`. Of a whole object δ is 1.3 × the `d_i`'s lower quartile,
-//! which lies in the dense part of a non-uniform cloud, while the median
-//! lies farther towards the sparse end: the sparse end's `δ_i` stayed
-//! too small, by about 1.7 at 8:1, and its non-data counts too large.
-//! With `m` the `m_i` at δ's own quantile (now, tolerance 1.25): 0.932 /
-//! 0.829, the paper's four conditions' means moved by −0.0034 … +0.0031
-//! (YCB banana 0.887 → 0.974, fandisk 0.707 → 0.882, torus 0.900 → 0.939).
-//! At seed 7: non-uniform 0.911 → 0.922 / 0.798 → 0.808, the four
-//! conditions −0.011 (surface outliers, genus > 0: the mug −0.025 and the
-//! torus.obj −0.027; both move that much from seed to seed) … +0.005.
-//! A single view's δ is the median, so there `m` moves only from the
-//! median `d_i` to the median `m_i`: over the 45 sequences of
-//! `benches/robot_view_eval.sh` the median last-third F 0.887 → 0.888
-//! (mean 0.830 → 0.829) and the seen-side median 0.939 either way.
-//!
-//! The paper's local δ_R alone
+//! (uniform original: 0.948 / 0.857). The paper's local δ_R alone
 //! (`search_delta = "local"`) gave 0.691 / 0.602 on the non-uniform
 //! condition: the filter's hole and the occupancy leak remain.
 //!
@@ -99,37 +80,19 @@ use std::num::NonZero;
 
 /// The per-point spacing `δ_i` of the used `points` (see the module docs)
 /// from their `d_i` (`d`, parallel to `points`), the global `delta`, the
-/// quantile `at` of the `d_i` that `delta` was taken at, the neighbourhood
-/// size `cfg.neighbours` (clamped to the cloud) and `cfg.tolerance`.
-/// Empty when `points` is empty.
+/// neighbourhood size `cfg.neighbours` (clamped to the cloud) and
+/// `cfg.tolerance` (`m` is taken times it). Empty when `points` is empty.
 pub(crate) fn local_spacing(
     points: &[Vec3],
     d: &[f64],
     delta: f64,
-    at: f64,
     cfg: &LocalSpacingConfig,
 ) -> Vec<f64> {
-    if points.is_empty() || d.len() != points.len() {
+    let neighbours = cfg.neighbours;
+    let m = median_of(d) * cfg.tolerance;
+    if points.is_empty() || d.len() != points.len() || !(m > 0.0 && m.is_finite()) {
         return vec![delta; points.len()];
     }
-    let mut m_i = neighbourhood_medians(points, d, cfg.neighbours);
-    let reference = {
-        let mut order = m_i.clone();
-        let k = ((order.len() as f64 * at) as usize).min(order.len() - 1);
-        *order.select_nth_unstable_by(k, f64::total_cmp).1 * cfg.tolerance
-    };
-    if !(reference > 0.0 && reference.is_finite()) {
-        return vec![delta; points.len()];
-    }
-    for m in &mut m_i {
-        *m = delta * (*m / reference).max(1.0);
-    }
-    m_i
-}
-
-/// The median `d_j` over each point's `neighbours` nearest points (itself
-/// included): its neighbourhood's spacing.
-fn neighbourhood_medians(points: &[Vec3], d: &[f64], neighbours: usize) -> Vec<f64> {
     let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
     let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&coords);
     let qty = NonZero::new(neighbours.clamp(1, points.len())).unwrap_or(NonZero::<usize>::MIN);
@@ -142,7 +105,8 @@ fn neighbourhood_medians(points: &[Vec3], d: &[f64], neighbours: usize) -> Vec<f
                     .iter()
                     .filter_map(|nn| d.get(nn.item as usize)),
             );
-            median_of(near)
+            let m_i = median_of(near);
+            delta * (m_i / m).max(1.0)
         })
         .collect()
 }
@@ -233,10 +197,7 @@ mod tests {
         let d = Density::new(points, 8).unwrap();
         let delta = d.median();
         let cfg = LocalSpacingConfig::default();
-        (
-            local_spacing(points, d.per_point(), delta, 0.5, &cfg),
-            delta,
-        )
+        (local_spacing(points, d.per_point(), delta, &cfg), delta)
     }
 
     #[test]
@@ -275,36 +236,6 @@ mod tests {
     }
 
     #[test]
-    fn the_reference_is_taken_at_the_quantile_delta_comes_from() {
-        // A whole object's δ is 1.3 × the lower quartile of the d_i, which
-        // lies in the dense part of a falling density. Against the median
-        // neighbourhood (the reference of a single view) the sparse end's
-        // spacing would stay too small; against the neighbourhoods at the
-        // lower quartile it grows by the density's own ratio.
-        let pts = falling(8000, 8.0, 2);
-        let d = Density::new(&pts, 8).unwrap();
-        let mut order = d.per_point().to_vec();
-        order.sort_by(f64::total_cmp);
-        let delta = 1.3 * order[order.len() / 4];
-        let cfg = LocalSpacingConfig::default();
-        let sparse_over_dense = |at: f64| {
-            let f = local_spacing(&pts, d.per_point(), delta, at, &cfg);
-            let mean_where = |lo: f64, hi: f64| {
-                let v: Vec<f64> = (0..pts.len())
-                    .filter(|&i| pts[i].x >= lo && pts[i].x < hi)
-                    .map(|i| f[i])
-                    .collect();
-                v.iter().sum::<f64>() / v.len() as f64
-            };
-            mean_where(0.9, 1.0) / delta
-        };
-        let (quartile, median) = (sparse_over_dense(0.25), sparse_over_dense(0.5));
-        eprintln!("sparse end δ_i / δ: reference at the quartile {quartile}, median {median}");
-        assert!(quartile > 1.1 * median, "{quartile} vs {median}");
-        assert!(quartile > 1.6 && quartile < 2.4, "{quartile}");
-    }
-
-    #[test]
     fn the_relative_filter_keeps_a_sparse_end_and_drops_isolated_points() {
         // Density 8:1 along x: the sparse end's d_i lie about twice the median.
         let mut pts = falling(6000, 8.0, 3);
@@ -339,12 +270,9 @@ mod tests {
     #[test]
     fn degenerate_inputs_give_the_global_spacing() {
         let cfg = LocalSpacingConfig::default();
-        assert!(local_spacing(&[], &[], 0.1, 0.5, &cfg).is_empty());
+        assert!(local_spacing(&[], &[], 0.1, &cfg).is_empty());
         let pts = [Vec3::zeros(), Vec3::x()];
-        assert_eq!(
-            local_spacing(&pts, &[0.0, 0.0], 0.1, 0.5, &cfg),
-            vec![0.1, 0.1]
-        );
-        assert_eq!(local_spacing(&pts, &[1.0], 0.1, 0.5, &cfg), vec![0.1, 0.1]);
+        assert_eq!(local_spacing(&pts, &[0.0, 0.0], 0.1, &cfg), vec![0.1, 0.1]);
+        assert_eq!(local_spacing(&pts, &[1.0], 0.1, &cfg), vec![0.1, 0.1]);
     }
 }
