@@ -15,7 +15,7 @@ use nalgebra::Isometry3;
 use sepmem::bag::Bag;
 use sepmem::eval::view::{ViewFrame, ViewTracker};
 use sepmem::synth::truth::GroundTruthIndex;
-use sepmem::synth::view_metrics::seen_side_accuracy;
+use sepmem::synth::view_metrics::{seen_side_accuracy, SeenSide};
 
 const STREAM: &str = "/synth/mug/points";
 /// `metrics.tau`: 1 % of the object's longest edge.
@@ -60,6 +60,22 @@ fn the_true_mesh_scores_the_whole_seen_side_and_a_moved_copy_little() {
         assert!(off.accuracy().unwrap() < 0.1, "{off:?}");
         assert_eq!(off.rim_rays, exact.rim_rays);
         assert!(off.rim_accuracy().unwrap() < 0.1, "{off:?}");
+        // Moved away from the camera, the object stands out of the mesh:
+        // the failed rays first hit it behind the true surface; moved
+        // towards the camera, in front of it.
+        let failed = |s: &SeenSide| s.rays - s.within;
+        assert!(off.behind as f64 >= 0.9 * failed(&off) as f64, "{off:?}");
+        assert!(off.in_front * 100 <= failed(&off), "{off:?}");
+        let mut nearer = posed.clone();
+        for v in &mut nearer.vertices {
+            v.z -= 3.0 * tau;
+        }
+        let near = seen_side_accuracy(&frame.camera, &posed, &nearer, tau).unwrap();
+        assert!(
+            near.in_front as f64 >= 0.9 * failed(&near) as f64,
+            "{near:?}"
+        );
+        assert!(near.behind * 100 <= failed(&near), "{near:?}");
         // Shrunk about its centre by a millimetre: the inside keeps its
         // depth within τ, the rim, which the rays graze, does not.
         let c = posed.aabb().center();
@@ -73,6 +89,9 @@ fn the_true_mesh_scores_the_whole_seen_side_and_a_moved_copy_little() {
             small.inner_accuracy().unwrap(),
         );
         assert!(rim < inner - 0.1, "{small:?}");
+        // The rays a smaller mesh misses altogether lie on the rim.
+        assert!(small.missed() > 0, "{small:?}");
+        assert!(small.missed() <= small.rim_rays, "{small:?}");
     }
 }
 
@@ -189,9 +208,23 @@ fn replay_prints_every_view_score_per_frame_and_per_third() {
         "pose error max rot ",
         "points outside by > 3 sigma ",
         "silhouette excess median ",
+        "seen side's failed rays ",
     ] {
         assert!(summary.contains(part), "{summary}");
     }
+    // The failed rays by kind add up to all of them (within rounding).
+    let kinds = summary.split("seen side's failed rays ").nth(1).unwrap();
+    let shares: f64 = ["in front ", "behind ", "missed "]
+        .iter()
+        .map(|k| {
+            let at = kinds
+                .split(k)
+                .nth(1)
+                .unwrap_or_else(|| panic!("{k}: {kinds}"));
+            at.split(" %").next().unwrap().parse::<f64>().unwrap()
+        })
+        .sum();
+    assert!((98.0..=102.0).contains(&shares), "{kinds}");
     // The replay's own summary lines are still there, as the other tests parse them.
     assert!(out.contains("summary: 30 samples, 30 frames ok"), "{out}");
     let score = out

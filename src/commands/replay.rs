@@ -50,6 +50,7 @@ use sepmem::eval::{cold_references, score_frame, FrameScore, ScoreConfig};
 use sepmem::pipeline::engine::Engine;
 use sepmem::pipeline::StartPath;
 use sepmem::synth::truth::GroundTruthIndex;
+use sepmem::synth::view_metrics::SeenSide;
 use sepmem::transport::keys::expand_topic_template;
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
@@ -639,7 +640,8 @@ fn view_columns(v: Option<&ViewScore>) -> String {
 /// volume IoU, pose error and coverage over the first and the last third
 /// of its scored frames (means), the median seen side over all frames
 /// (and on the silhouette's rim alone), the largest pose error, the points
-/// left out and the silhouette excess (median and largest over the frames).
+/// left out, the silhouette excess (median and largest over the frames) and
+/// the seen side's failed rays by kind ([`failed_rays`]).
 fn view_summary(id: &str, st: &StreamSummary) -> String {
     let n = st.views.len().min(st.scores.len());
     let third = n.div_ceil(3);
@@ -670,8 +672,11 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
     let all = |g: fn(&ViewScore) -> f64| views.iter().map(g).collect::<Vec<_>>();
     let on_surface: usize = views.iter().map(|v| v.outside.on_surface).sum();
     let outside: usize = views.iter().map(|v| v.outside.outside).sum();
+    let rays = views
+        .iter()
+        .fold(SeenSide::default(), |a, v| a + v.seen_rays);
     format!(
-        "view {id}: {n} frames; first third ({third}): {}; last third ({third}): {}; seen side median {:.3} min {:.3} (on the silhouette's rim median {:.3}); pose error max rot {:.2} deg trans {:.1} mm; points outside by > 3 sigma {outside} of {on_surface} ({} frames with any), worst {:.1} sigma; silhouette excess median {:.3} max {:.3}",
+        "view {id}: {n} frames; first third ({third}): {}; last third ({third}): {}; seen side median {:.3} min {:.3} (on the silhouette's rim median {:.3}); pose error max rot {:.2} deg trans {:.1} mm; points outside by > 3 sigma {outside} of {on_surface} ({} frames with any), worst {:.1} sigma; silhouette excess median {:.3} max {:.3}; {}",
         part(0..third),
         part(n - third..n),
         percentile(&seen, 0.5),
@@ -683,6 +688,22 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
         max(&all(|v| v.outside.worst_sigmas)),
         percentile(&excess, 0.5),
         max(&excess),
+        failed_rays(&rays),
+    )
+}
+
+/// The seen side's failed rays over a stream's frames, by kind: where the
+/// mesh stands in front of the object, where the object stands out of it
+/// (behind: a planner would collide there) and where the ray misses it.
+fn failed_rays(r: &SeenSide) -> String {
+    let failed = r.rays - r.within;
+    let pc = |n: usize| 100.0 * n as f64 / failed.max(1) as f64;
+    format!(
+        "seen side's failed rays {failed} of {}: mesh in front {:.0} %, behind {:.0} %, missed {:.0} %",
+        r.rays,
+        pc(r.in_front),
+        pc(r.behind),
+        pc(r.missed()),
     )
 }
 

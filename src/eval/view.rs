@@ -47,7 +47,8 @@ use crate::pipeline::align::Rigid;
 use crate::synth::raycast::RaycastError;
 use crate::synth::truth::{TruthFrame, TruthTrack};
 use crate::synth::view_metrics::{
-    points_outside_of, pose_error, volume_iou_of, CastMesh, Coverage, PointsOutside, TruthRays,
+    points_outside_of, pose_error, volume_iou_of, CastMesh, Coverage, PointsOutside, SeenSide,
+    TruthRays,
 };
 use crate::synth::Noise;
 
@@ -71,6 +72,8 @@ pub struct ViewScore {
     pub seen_side: Option<f64>,
     /// The seen-side accuracy on the silhouette's rim alone.
     pub seen_side_rim: Option<f64>,
+    /// The seen side's ray counts, with the failed rays by kind.
+    pub seen_rays: SeenSide,
     /// Volume IoU with the true solid (`None` when both are empty).
     pub volume_iou: Option<f64>,
     /// Rotation error of the tracked pose (degrees).
@@ -140,6 +143,7 @@ impl ViewTracker {
         Ok(ViewScore {
             seen_side: seen.accuracy(),
             seen_side_rim: seen.rim_accuracy(),
+            seen_rays: seen,
             volume_iou: iou.iou(),
             rotation_deg: err.rotation_rad.to_degrees(),
             translation_mm: err.translation_m * 1e3,

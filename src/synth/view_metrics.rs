@@ -4,7 +4,9 @@
 //!
 //! - [`seen_side_accuracy`]: the share of the camera's rays that hit the true
 //!   object and whose first hit on the reconstructed mesh lies within τ of
-//!   the true depth (the visible side, where the data are);
+//!   the true depth (the visible side, where the data are), with the
+//!   failed rays by kind: the mesh in front of the true surface, behind it
+//!   (the object stands out of the mesh) or missed;
 //! - [`volume_iou`]: the volume intersection over union of two closed meshes,
 //!   by inside tests at the centres of a regular grid (the closure of the
 //!   unseen side);
@@ -65,6 +67,13 @@ pub struct SeenSide {
     pub rim_rays: usize,
     /// Of those, the rays within τ.
     pub rim_within: usize,
+    /// Failed rays whose first hit on the reconstruction lies more than τ
+    /// in front of the true surface: the mesh bulges towards the camera.
+    pub in_front: usize,
+    /// Failed rays whose first hit lies more than τ behind the true
+    /// surface: there the object stands out of the mesh (what a planner
+    /// would collide with).
+    pub behind: usize,
 }
 
 impl SeenSide {
@@ -81,6 +90,28 @@ impl SeenSide {
     /// The accuracy inside the rim.
     pub fn inner_accuracy(&self) -> Option<f64> {
         share(self.within - self.rim_within, self.rays - self.rim_rays)
+    }
+
+    /// Failed rays that miss the reconstruction altogether (its
+    /// silhouette is narrower than the object's there).
+    pub fn missed(&self) -> usize {
+        self.rays - self.within - self.in_front - self.behind
+    }
+}
+
+/// The counts of both (the rays of two rows, or of two frames).
+impl std::ops::Add for SeenSide {
+    type Output = Self;
+
+    fn add(self, o: Self) -> Self {
+        Self {
+            rays: self.rays + o.rays,
+            within: self.within + o.within,
+            rim_rays: self.rim_rays + o.rim_rays,
+            rim_within: self.rim_within + o.rim_within,
+            in_front: self.in_front + o.in_front,
+            behind: self.behind + o.behind,
+        }
     }
 }
 
@@ -152,12 +183,6 @@ impl<'c> TruthRays<'c> {
             return SeenSide::default();
         };
         let origin = Vec3::zeros();
-        let add = |a: SeenSide, b: SeenSide| SeenSide {
-            rays: a.rays + b.rays,
-            within: a.within + b.within,
-            rim_rays: a.rim_rays + b.rim_rays,
-            rim_within: a.rim_within + b.rim_within,
-        };
         self.hits
             .par_iter()
             .enumerate()
@@ -166,17 +191,20 @@ impl<'c> TruthRays<'c> {
                 for (a, t) in row.iter().enumerate() {
                     let Some(t) = *t else { continue };
                     let d = self.camera.pixel_ray(i0 + a, j0 + b);
-                    let near = recon.caster.first_hit(&origin, &d, t + tau);
-                    let ok = near.is_some_and(|g| (g.t - t).abs() <= tau);
+                    let near = recon.caster.first_hit(&origin, &d, f64::INFINITY);
+                    let off = near.map(|g| g.t - t);
+                    let ok = off.is_some_and(|e| e.abs() <= tau);
                     let rim = self.on_rim(a, b);
                     c.rays += 1;
                     c.within += usize::from(ok);
                     c.rim_rays += usize::from(rim);
                     c.rim_within += usize::from(rim && ok);
+                    c.in_front += usize::from(off.is_some_and(|e| e < -tau));
+                    c.behind += usize::from(off.is_some_and(|e| e > tau));
                 }
                 c
             })
-            .reduce(SeenSide::default, add)
+            .reduce(SeenSide::default, |a, b| a + b)
     }
 
     /// Whether the true hit at `(a, b)` of the rectangle has a neighbour
