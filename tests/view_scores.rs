@@ -205,6 +205,7 @@ fn replay_prints_every_view_score_per_frame_and_per_third() {
         "last third (10): F ",
         "seen side median ",
         "on the silhouette's rim median ",
+        ", inside it ",
         "pose error max rot ",
         "points outside by > 3 sigma ",
         "silhouette excess median ",
@@ -212,6 +213,13 @@ fn replay_prints_every_view_score_per_frame_and_per_third() {
     ] {
         assert!(summary.contains(part), "{summary}");
     }
+    let inside: f64 = summary
+        .split(", inside it ")
+        .nth(1)
+        .and_then(|r| r.split(')').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{summary}"));
+    assert!((0.0..=1.0).contains(&inside), "{summary}");
     // The failed rays by kind add up to all of them (within rounding).
     let kinds = summary.split("seen side's failed rays ").nth(1).unwrap();
     let shares: f64 = ["in front ", "behind ", "missed "]

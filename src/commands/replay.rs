@@ -639,7 +639,8 @@ fn view_columns(v: Option<&ViewScore>) -> String {
 /// The `view` summary line of a stream: the whole-object F, seen side,
 /// volume IoU, pose error and coverage over the first and the last third
 /// of its scored frames (means), the median seen side over all frames
-/// (and on the silhouette's rim alone), the largest pose error, the points
+/// (and on the silhouette's rim alone, and inside it), the largest pose
+/// error, the points
 /// left out, the silhouette excess (median and largest over the frames) and
 /// the seen side's failed rays by kind ([`failed_rays`]).
 fn view_summary(id: &str, st: &StreamSummary) -> String {
@@ -668,6 +669,7 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
     };
     let seen = sorted(|v| v.seen_side);
     let rim = sorted(|v| v.seen_side_rim);
+    let inner = sorted(|v| v.seen_rays.inner_accuracy());
     let excess = sorted(|v| v.silhouette_excess);
     let all = |g: fn(&ViewScore) -> f64| views.iter().map(g).collect::<Vec<_>>();
     let on_surface: usize = views.iter().map(|v| v.outside.on_surface).sum();
@@ -676,12 +678,13 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
         .iter()
         .fold(SeenSide::default(), |a, v| a + v.seen_rays);
     format!(
-        "view {id}: {n} frames; first third ({third}): {}; last third ({third}): {}; seen side median {:.3} min {:.3} (on the silhouette's rim median {:.3}); pose error max rot {:.2} deg trans {:.1} mm; points outside by > 3 sigma {outside} of {on_surface} ({} frames with any), worst {:.1} sigma; silhouette excess median {:.3} max {:.3}; {}",
+        "view {id}: {n} frames; first third ({third}): {}; last third ({third}): {}; seen side median {:.3} min {:.3} (on the silhouette's rim median {:.3}, inside it {:.3}); pose error max rot {:.2} deg trans {:.1} mm; points outside by > 3 sigma {outside} of {on_surface} ({} frames with any), worst {:.1} sigma; silhouette excess median {:.3} max {:.3}; {}",
         part(0..third),
         part(n - third..n),
         percentile(&seen, 0.5),
         min(&seen),
         percentile(&rim, 0.5),
+        percentile(&inner, 0.5),
         max(&all(|v| v.rotation_deg)),
         max(&all(|v| v.translation_mm)),
         views.iter().filter(|v| v.outside.outside > 0).count(),
