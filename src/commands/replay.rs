@@ -640,9 +640,9 @@ fn view_columns(v: Option<&ViewScore>) -> String {
 /// volume IoU, pose error and coverage over the first and the last third
 /// of its scored frames (means), the median seen side over all frames
 /// (and on the silhouette's rim alone, and inside it), the largest pose
-/// error, the points
-/// left out, the silhouette excess (median and largest over the frames) and
-/// the seen side's failed rays by kind ([`failed_rays`]).
+/// error, the points left out, the silhouette excess (median and largest
+/// over the frames) and the seen side's failed rays by kind
+/// ([`failed_rays`]).
 fn view_summary(id: &str, st: &StreamSummary) -> String {
     let n = st.views.len().min(st.scores.len());
     let third = n.div_ceil(3);
