@@ -123,7 +123,7 @@ fn untracked_motion_drifts_by_the_true_turn_and_coverage_grows_to_the_half_turn(
             p.rotation_deg < 1e-6 && p.translation_mm < 1e-6,
             "{k}: {p:?}"
         );
-        assert!(p.seen_side.unwrap() >= 0.99, "{k}: {p:?}");
+        assert!(p.seen_side().unwrap() >= 0.99, "{k}: {p:?}");
         assert_eq!(p.volume_iou, Some(1.0));
         // No motion tracked: the error is the turn since the first frame.
         let s = still

@@ -620,8 +620,8 @@ fn view_columns(v: Option<&ViewScore>) -> String {
     match v {
         Some(v) => format!(
             " {:>6} {:>6} {:>6} {:>6.2} {:>6.1} {:>6.3} {:>6} {:>6}",
-            opt(v.seen_side),
-            opt(v.seen_side_rim),
+            opt(v.seen_side()),
+            opt(v.seen_side_rim()),
             opt(v.volume_iou),
             v.rotation_deg,
             v.translation_mm,
@@ -653,7 +653,7 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
         format!(
             "F {:.3} seen side {:.3} IoU {:.3} rot {:.2} deg trans {:.1} mm coverage {:.3}",
             mean(&f),
-            mean(&pick(|v| v.seen_side)),
+            mean(&pick(|v| v.seen_side())),
             mean(&pick(|v| v.volume_iou)),
             mean(&pick(|v| Some(v.rotation_deg))),
             mean(&pick(|v| Some(v.translation_mm))),
@@ -667,8 +667,8 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
         v.sort_by(f64::total_cmp);
         v
     };
-    let seen = sorted(|v| v.seen_side);
-    let rim = sorted(|v| v.seen_side_rim);
+    let seen = sorted(|v| v.seen_side());
+    let rim = sorted(|v| v.seen_side_rim());
     let inner = sorted(|v| v.seen_rays.inner_accuracy());
     let excess = sorted(|v| v.silhouette_excess);
     let all = |g: fn(&ViewScore) -> f64| views.iter().map(g).collect::<Vec<_>>();

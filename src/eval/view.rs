@@ -68,10 +68,6 @@ const COVERAGE_SEED: u64 = 20;
 /// The robot's-view scores of one frame of one stream.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ViewScore {
-    /// Seen-side depth accuracy (`None` when the camera does not see the object).
-    pub seen_side: Option<f64>,
-    /// The seen-side accuracy on the silhouette's rim alone.
-    pub seen_side_rim: Option<f64>,
     /// The seen side's ray counts, with the failed rays by kind.
     pub seen_rays: SeenSide,
     /// Volume IoU with the true solid (`None` when both are empty).
@@ -87,6 +83,18 @@ pub struct ViewScore {
     /// The mesh's projection beyond the true silhouette, as a share of the
     /// silhouette (`None` when the camera does not see the object).
     pub silhouette_excess: Option<f64>,
+}
+
+impl ViewScore {
+    /// Seen-side depth accuracy (`None` when the camera does not see the object).
+    pub fn seen_side(&self) -> Option<f64> {
+        self.seen_rays.accuracy()
+    }
+
+    /// The seen-side accuracy on the silhouette's rim alone.
+    pub fn seen_side_rim(&self) -> Option<f64> {
+        self.seen_rays.rim_accuracy()
+    }
 }
 
 /// What [`ViewTracker::score`] needs of one frame.
@@ -141,8 +149,6 @@ impl ViewTracker {
         let err = pose_error(&pose, &f.truth.pose);
         let coverage = self.coverage_after(f)?;
         Ok(ViewScore {
-            seen_side: seen.accuracy(),
-            seen_side_rim: seen.rim_accuracy(),
             seen_rays: seen,
             volume_iou: iou.iou(),
             rotation_deg: err.rotation_rad.to_degrees(),
