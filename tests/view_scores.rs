@@ -170,7 +170,7 @@ fn replay_prints_every_view_score_per_frame_and_per_third() {
     let out = common::sepmem_stdout(&[std::ffi::OsStr::new("replay"), mug_bag().as_os_str()]);
     let header = out.lines().find(|l| l.starts_with("stream")).unwrap();
     let cols = [
-        "F", "seen", "IoU", "rot", "tr_mm", "cover", "out3s", "excess", "rim",
+        "F", "seen", "IoU", "rot", "tr_mm", "cover", "out3s", "excess", "rim", "adds",
     ]
     .map(|c| column(header, c));
     let rows: Vec<Vec<f64>> = out
@@ -191,11 +191,12 @@ fn replay_prints_every_view_score_per_frame_and_per_third() {
             assert!((0.0..=1.0).contains(&share), "{k}: {r:?}");
         }
         assert!((0.0..=180.0).contains(&r[3]) && r[4] >= 0.0, "{k}: {r:?}");
+        assert!(r[9] >= 0.0, "{k}: {r:?}");
         assert!(r[5] >= cover, "coverage falls at {k}: {r:?}");
         cover = r[5];
     }
     // The first frame is cold: its tracked pose is the true one.
-    assert_eq!((rows[0][3], rows[0][4]), (0.0, 0.0));
+    assert_eq!((rows[0][3], rows[0][4], rows[0][9]), (0.0, 0.0, 0.0));
     let summary = out
         .lines()
         .find(|l| l.starts_with(&format!("view {STREAM}: 30 frames")))
@@ -207,6 +208,7 @@ fn replay_prints_every_view_score_per_frame_and_per_third() {
         "on the silhouette's rim median ",
         ", inside it ",
         "pose error max rot ",
+        " mm ADD-S ",
         "points outside by > 3 sigma ",
         "silhouette excess median ",
         "seen side's failed rays ",

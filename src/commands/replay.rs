@@ -21,7 +21,9 @@
 //! [`sepmem::eval::view`] follow at the end of each row (`seen` side depth
 //! accuracy, `rim`: the same on the silhouette's rim alone,
 //! volume `IoU` with the true solid, `rot` (°) and
-//! `tr_mm` error of the tracked pose, `cover`: share of the true surface
+//! `tr_mm` error of the tracked pose, `adds`: that error as the true
+//! surface sees it (ADD-S, mm; 0 for a turn about an axis of symmetry),
+//! `cover`: share of the true surface
 //! seen so far, `out3s`: share of the points on the true surface that lie
 //! outside the mesh by more than 3σ of the sensor noise, `excess`: the
 //! mesh's projection beyond the true silhouette, as a share of the
@@ -298,8 +300,8 @@ pub fn run_opts(
     }
     if scored {
         header += &format!(
-            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
-            "seen", "rim", "IoU", "rot", "tr_mm", "cover", "out3s", "excess"
+            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
+            "seen", "rim", "IoU", "rot", "tr_mm", "adds", "cover", "out3s", "excess"
         );
     }
     print(header);
@@ -610,28 +612,31 @@ fn view_score(
     Ok(Some(v))
 }
 
-/// The per-frame columns `seen rim IoU rot tr_mm cover out3s excess`
+/// The per-frame columns `seen rim IoU rot tr_mm adds cover out3s excess`
 /// (dashes without a score); `rim` is the seen side on the silhouette's
-/// rim alone, `out3s` the share of the points on the true surface
+/// rim alone, `adds` the tracked pose's ADD-S in mm (the true surface's
+/// mean distance from itself placed by that pose: 0 for a turn about an
+/// axis of symmetry), `out3s` the share of the points on the true surface
 /// that lie outside the mesh by more than 3σ, `excess` the mesh's
 /// projection beyond the true silhouette, as a share of the silhouette.
 fn view_columns(v: Option<&ViewScore>) -> String {
     let opt = |x: Option<f64>| x.map_or_else(|| "-".to_string(), |x| format!("{x:.3}"));
     match v {
         Some(v) => format!(
-            " {:>6} {:>6} {:>6} {:>6.2} {:>6.1} {:>6.3} {:>6} {:>6}",
+            " {:>6} {:>6} {:>6} {:>6.2} {:>6.1} {:>6.2} {:>6.3} {:>6} {:>6}",
             opt(v.seen_side()),
             opt(v.seen_side_rim()),
             opt(v.volume_iou),
             v.rotation_deg,
             v.translation_mm,
+            v.surface_error_mm,
             v.coverage,
             opt(v.outside.share()),
             opt(v.silhouette_excess)
         ),
         None => format!(
-            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
-            "-", "-", "-", "-", "-", "-", "-", "-"
+            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
+            "-", "-", "-", "-", "-", "-", "-", "-", "-"
         ),
     }
 }
@@ -651,12 +656,13 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
         let v = &st.views[range];
         let pick = |g: fn(&ViewScore) -> Option<f64>| v.iter().filter_map(g).collect::<Vec<_>>();
         format!(
-            "F {:.3} seen side {:.3} IoU {:.3} rot {:.2} deg trans {:.1} mm coverage {:.3}",
+            "F {:.3} seen side {:.3} IoU {:.3} rot {:.2} deg trans {:.1} mm ADD-S {:.2} mm coverage {:.3}",
             mean(&f),
             mean(&pick(|v| v.seen_side())),
             mean(&pick(|v| v.volume_iou)),
             mean(&pick(|v| Some(v.rotation_deg))),
             mean(&pick(|v| Some(v.translation_mm))),
+            mean(&pick(|v| Some(v.surface_error_mm))),
             mean(&pick(|v| Some(v.coverage))),
         )
     };
@@ -678,7 +684,7 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
         .iter()
         .fold(SeenSide::default(), |a, v| a + v.seen_rays);
     format!(
-        "view {id}: {n} frames; first third ({third}): {}; last third ({third}): {}; seen side median {:.3} min {:.3} (on the silhouette's rim median {:.3}, inside it {:.3}); pose error max rot {:.2} deg trans {:.1} mm; points outside by > 3 sigma {outside} of {on_surface} ({} frames with any), worst {:.1} sigma; silhouette excess median {:.3} max {:.3}; {}",
+        "view {id}: {n} frames; first third ({third}): {}; last third ({third}): {}; seen side median {:.3} min {:.3} (on the silhouette's rim median {:.3}, inside it {:.3}); pose error max rot {:.2} deg trans {:.1} mm ADD-S {:.2} mm; points outside by > 3 sigma {outside} of {on_surface} ({} frames with any), worst {:.1} sigma; silhouette excess median {:.3} max {:.3}; {}",
         part(0..third),
         part(n - third..n),
         percentile(&seen, 0.5),
@@ -687,6 +693,7 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
         percentile(&inner, 0.5),
         max(&all(|v| v.rotation_deg)),
         max(&all(|v| v.translation_mm)),
+        max(&all(|v| v.surface_error_mm)),
         views.iter().filter(|v| v.outside.outside > 0).count(),
         max(&all(|v| v.outside.worst_sigmas)),
         percentile(&excess, 0.5),

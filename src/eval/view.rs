@@ -19,7 +19,11 @@
 //!   new points). The tracked pose is therefore the composition of the warm
 //!   motions since the stream's last cold frame, anchored at the true pose
 //!   of that cold frame (a cold frame re-anchors it, so its error is 0):
-//!   the drift of the warm chain;
+//!   the drift of the warm chain; and the same drift as the true surface
+//!   sees it (ADD-S, on the coverage's samples), which a turn about an
+//!   axis of symmetry does not change: a bottle or a can turning about its
+//!   own axis shows the tracker no turn, and its rotation error grows to
+//!   100° while its surface stays in place;
 //! - **points outside**: the frame's points on the true surface (within
 //!   [`OUTSIDE_SIGMAS`] σ(z) of it) that lie outside the mesh by more than
 //!   [`OUTSIDE_SIGMAS`] σ(z), σ the Kinect axial noise of `sepmem synth`'s
@@ -76,6 +80,10 @@ pub struct ViewScore {
     pub rotation_deg: f64,
     /// Translation error of the tracked pose (mm).
     pub translation_mm: f64,
+    /// ADD-S of the tracked pose (mm): the mean distance of the true
+    /// surface placed by it from the true surface (0 for a turn about an
+    /// axis of symmetry).
+    pub surface_error_mm: f64,
     /// Share of the true surface seen so far on this stream.
     pub coverage: f64,
     /// The frame's points on the true surface that the mesh leaves out.
@@ -148,11 +156,15 @@ impl ViewTracker {
         self.pose = Some(pose);
         let err = pose_error(&pose, &f.truth.pose);
         let coverage = self.coverage_after(f)?;
+        let surface_error = self.coverage.as_ref().map_or(0.0, |(_, c)| {
+            c.surface().pose_surface_error(&pose, &f.truth.pose)
+        });
         Ok(ViewScore {
             seen_rays: seen,
             volume_iou: iou.iou(),
             rotation_deg: err.rotation_rad.to_degrees(),
             translation_mm: err.translation_m * 1e3,
+            surface_error_mm: surface_error * 1e3,
             coverage,
             outside,
             silhouette_excess: excess.share(),

@@ -12,6 +12,8 @@
 //!   unseen side);
 //! - [`pose_error`]: the rotation angle and translation between two poses
 //!   (tracking drift);
+//! - [`SurfaceSamples::pose_surface_error`]: the pose error as the true
+//!   surface sees it (ADD-S): zero for a turn about an axis of symmetry;
 //! - [`Coverage`]: the share of the object's surface seen so far over a
 //!   sequence of views, on area-uniform surface samples.
 //!
@@ -463,29 +465,20 @@ pub fn pose_error(estimate: &Isometry3<f64>, truth: &Isometry3<f64>) -> PoseErro
     }
 }
 
-/// The share of an object's surface seen so far: area-uniform samples of
-/// the mesh (object frame), each marked once a view sees it (in the image,
-/// within the depth range, not beyond `max_incidence_deg`, and the first
-/// surface along its pixel ray).
+/// Area-uniform samples of a true surface (object frame), with their
+/// triangles' normals, and the surface's caster.
 #[derive(Debug, Clone)]
-pub struct Coverage {
+pub struct SurfaceSamples {
     caster: MeshCaster,
     samples: Vec<(Vec3, Vec3)>,
-    seen: Vec<bool>,
-    cos_min: f64,
 }
 
-impl Coverage {
+impl SurfaceSamples {
     /// `samples` area-uniform points of `mesh` (deterministic for `seed`).
     ///
     /// # Errors
     /// [`RaycastError`] when the mesh cannot be ray cast or has no area.
-    pub fn new(
-        mesh: &TriMesh,
-        samples: usize,
-        max_incidence_deg: f64,
-        seed: u64,
-    ) -> Result<Self, RaycastError> {
+    pub fn new(mesh: &TriMesh, samples: usize, seed: u64) -> Result<Self, RaycastError> {
         let caster = MeshCaster::new(mesh)?;
         let mut cumulative = Vec::with_capacity(mesh.triangles.len());
         let mut total = 0.0;
@@ -511,13 +504,74 @@ impl Coverage {
                 }
                 (a + (b - a) * u + (c - a) * v, caster.normal(t as u32))
             })
-            .collect::<Vec<_>>();
+            .collect();
+        Ok(Self { caster, samples })
+    }
+
+    /// The samples.
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    /// Whether there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+
+    /// ADD-S of `estimate` against `truth` (both object frame → camera; the
+    /// symmetric average distance of Xiang et al. 2018, PoseCNN): the mean
+    /// distance from each sample, placed by `estimate` and taken back by
+    /// `truth`, to the true surface. A tracked pose that differs from the
+    /// truth only by a turn about an axis of symmetry (a bottle about its
+    /// own axis) places the surface where it is and scores 0, where
+    /// [`pose_error`] reports the turn; 0 without samples.
+    pub fn pose_surface_error(&self, estimate: &Isometry3<f64>, truth: &Isometry3<f64>) -> f64 {
+        if self.samples.is_empty() {
+            return 0.0;
+        }
+        let back = truth.inverse() * estimate;
+        let sum: f64 = self
+            .samples
+            .par_iter()
+            .map(|(p, _)| self.caster.distance(&(back * Point3::from(*p)).coords))
+            .sum();
+        sum / self.samples.len() as f64
+    }
+}
+
+/// The share of an object's surface seen so far: area-uniform samples of
+/// the mesh (object frame), each marked once a view sees it (in the image,
+/// within the depth range, not beyond `max_incidence_deg`, and the first
+/// surface along its pixel ray).
+#[derive(Debug, Clone)]
+pub struct Coverage {
+    surface: SurfaceSamples,
+    seen: Vec<bool>,
+    cos_min: f64,
+}
+
+impl Coverage {
+    /// `samples` area-uniform points of `mesh` (deterministic for `seed`).
+    ///
+    /// # Errors
+    /// [`RaycastError`] when the mesh cannot be ray cast or has no area.
+    pub fn new(
+        mesh: &TriMesh,
+        samples: usize,
+        max_incidence_deg: f64,
+        seed: u64,
+    ) -> Result<Self, RaycastError> {
+        let surface = SurfaceSamples::new(mesh, samples, seed)?;
         Ok(Self {
-            caster,
-            seen: vec![false; samples.len()],
-            samples,
+            seen: vec![false; surface.len()],
+            surface,
             cos_min: max_incidence_deg.to_radians().cos().max(1e-9),
         })
+    }
+
+    /// The surface samples the coverage marks.
+    pub fn surface(&self) -> &SurfaceSamples {
+        &self.surface
     }
 
     /// Mark the samples that `camera` sees with the object at `pose`
@@ -527,7 +581,8 @@ impl Coverage {
         let eye = inv.translation.vector;
         let (w, h) = (camera.width as f64, camera.height as f64);
         let mut n = 0;
-        for ((p, normal), seen) in self.samples.iter().zip(self.seen.iter_mut()) {
+        let SurfaceSamples { caster, samples } = &self.surface;
+        for ((p, normal), seen) in samples.iter().zip(self.seen.iter_mut()) {
             let q = (pose * Point3::from(*p)).coords;
             let Some((u, v)) = camera.project(&q) else {
                 continue;
@@ -544,7 +599,7 @@ impl Coverage {
                 continue;
             }
             // Unit parameter at the sample: a nearer hit hides it.
-            let first = self.caster.first_hit(&eye, &dir, 1.0 + 1e-9);
+            let first = caster.first_hit(&eye, &dir, 1.0 + 1e-9);
             if first.is_some_and(|f| f.t >= 1.0 - 1e-6) {
                 n += 1;
                 *seen = true;
@@ -718,6 +773,38 @@ mod tests {
         let e = pose_error(&quarter, &Isometry3::identity());
         assert!((e.rotation_rad - PI / 2.0).abs() < 1e-12);
         assert_eq!(e.translation_m, 0.0);
+    }
+
+    #[test]
+    fn pose_surface_error_ignores_a_turn_about_an_axis_of_symmetry() {
+        let truth = Isometry3::new(Vec3::new(0.05, -0.02, 0.9), Vec3::new(0.2, 0.5, 0.0));
+        let turned = |axis: Vec3| truth * Isometry3::new(Vec3::zeros(), axis);
+        // A ball turned about its centre by 90°: pose_error sees the turn,
+        // the surface does not (within the lattice's facets, 0.1 mm).
+        let ball = SurfaceSamples::new(&sphere(0.1, Vec3::zeros()), 4000, 1).unwrap();
+        let est = turned(Vec3::new(0.0, 0.0, PI / 2.0));
+        assert!((pose_error(&est, &truth).rotation_rad - PI / 2.0).abs() < 1e-9);
+        assert!(ball.pose_surface_error(&est, &truth) < 1e-4);
+        assert!(ball.pose_surface_error(&truth, &truth) < 1e-12);
+        // Shifted by s ≪ r: a sample at angle θ to the shift lies
+        // s·|cos θ| off the sphere, s/2 on average over the sphere.
+        let s = 0.004;
+        let shifted = Isometry3::translation(s, 0.0, 0.0) * truth;
+        let e = ball.pose_surface_error(&shifted, &truth);
+        assert!((e - s / 2.0).abs() < 0.1 * s, "{e}");
+        // The ellipsoid (0.5 × 0.35 × 0.25) has no axis of symmetry: turned
+        // by 90° about its shortest axis its long ends stand 0.15 m out.
+        let ell = crate::shapes::ellipsoid(32).unwrap().mesh;
+        let ell = SurfaceSamples::new(&ell, 4000, 1).unwrap();
+        let e = ell.pose_surface_error(&turned(Vec3::new(0.0, 0.0, PI / 2.0)), &truth);
+        assert!(e > 0.03, "{e}");
+        // The can (a surface of revolution about z, 64 facets around)
+        // turned about its own axis stays within its facets' chords (0.3
+        // mm); turned about x it does not.
+        let can = SurfaceSamples::new(&crate::shapes::can(64).unwrap().mesh, 4000, 1).unwrap();
+        let about_own = can.pose_surface_error(&turned(Vec3::new(0.0, 0.0, 1.0)), &truth);
+        let about_x = can.pose_surface_error(&turned(Vec3::new(0.3, 0.0, 0.0)), &truth);
+        assert!(about_own < 0.005 && about_x > 0.03, "{about_own} {about_x}");
     }
 
     #[test]
