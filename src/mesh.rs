@@ -65,6 +65,15 @@ impl TriMesh {
         self.triangles.is_empty()
     }
 
+    /// A copy moved rigidly by `by` (its vertices' scalars kept).
+    pub fn transformed(&self, by: &nalgebra::Isometry3<f64>) -> TriMesh {
+        let mut m = self.clone();
+        for v in &mut m.vertices {
+            *v = (by * nalgebra::Point3::from(*v)).coords;
+        }
+        m
+    }
+
     /// Bounding box of the vertices.
     pub fn aabb(&self) -> Aabb {
         Aabb::from_points(&self.vertices)

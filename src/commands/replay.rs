@@ -27,7 +27,8 @@
 //! seen so far, `out3s`: share of the points on the true surface that lie
 //! outside the mesh by more than 3σ of the sensor noise, `excess`: the
 //! mesh's projection beyond the true silhouette, as a share of the
-//! silhouette), and a `view` line
+//! silhouette, `pastex`: the largest such share in up to 8 of the stream's
+//! earlier views, the object at its true pose there), and a `view` line
 //! per stream gives them, with F, over the first and the last third of the
 //! frames, and the points left out over all frames.
 //!
@@ -300,8 +301,8 @@ pub fn run_opts(
     }
     if scored {
         header += &format!(
-            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
-            "seen", "rim", "IoU", "rot", "tr_mm", "adds", "cover", "out3s", "excess"
+            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
+            "seen", "rim", "IoU", "rot", "tr_mm", "adds", "cover", "out3s", "excess", "pastex"
         );
     }
     print(header);
@@ -618,12 +619,13 @@ fn view_score(
 /// mean distance from itself placed by that pose: 0 for a turn about an
 /// axis of symmetry), `out3s` the share of the points on the true surface
 /// that lie outside the mesh by more than 3σ, `excess` the mesh's
-/// projection beyond the true silhouette, as a share of the silhouette.
+/// projection beyond the true silhouette, as a share of the silhouette,
+/// and `pastex` the largest such share in the stream's earlier views.
 fn view_columns(v: Option<&ViewScore>) -> String {
     let opt = |x: Option<f64>| x.map_or_else(|| "-".to_string(), |x| format!("{x:.3}"));
     match v {
         Some(v) => format!(
-            " {:>6} {:>6} {:>6} {:>6.2} {:>6.1} {:>6.2} {:>6.3} {:>6} {:>6}",
+            " {:>6} {:>6} {:>6} {:>6.2} {:>6.1} {:>6.2} {:>6.3} {:>6} {:>6} {:>6}",
             opt(v.seen_side()),
             opt(v.seen_side_rim()),
             opt(v.volume_iou),
@@ -632,11 +634,12 @@ fn view_columns(v: Option<&ViewScore>) -> String {
             v.surface_error_mm,
             v.coverage,
             opt(v.outside.share()),
-            opt(v.silhouette_excess)
+            opt(v.silhouette_excess),
+            opt(v.past_silhouette_excess)
         ),
         None => format!(
-            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
-            "-", "-", "-", "-", "-", "-", "-", "-", "-"
+            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
+            "-", "-", "-", "-", "-", "-", "-", "-", "-", "-"
         ),
     }
 }
@@ -677,6 +680,7 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
     let rim = sorted(|v| v.seen_side_rim());
     let inner = sorted(|v| v.seen_rays.inner_accuracy());
     let excess = sorted(|v| v.silhouette_excess);
+    let past = sorted(|v| v.past_silhouette_excess);
     let all = |g: fn(&ViewScore) -> f64| views.iter().map(g).collect::<Vec<_>>();
     let on_surface: usize = views.iter().map(|v| v.outside.on_surface).sum();
     let outside: usize = views.iter().map(|v| v.outside.outside).sum();
@@ -684,7 +688,7 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
         .iter()
         .fold(SeenSide::default(), |a, v| a + v.seen_rays);
     format!(
-        "view {id}: {n} frames; first third ({third}): {}; last third ({third}): {}; seen side median {:.3} min {:.3} (on the silhouette's rim median {:.3}, inside it {:.3}); pose error max rot {:.2} deg trans {:.1} mm ADD-S {:.2} mm; points outside by > 3 sigma {outside} of {on_surface} ({} frames with any), worst {:.1} sigma; silhouette excess median {:.3} max {:.3}; {}",
+        "view {id}: {n} frames; first third ({third}): {}; last third ({third}): {}; seen side median {:.3} min {:.3} (on the silhouette's rim median {:.3}, inside it {:.3}); pose error max rot {:.2} deg trans {:.1} mm ADD-S {:.2} mm; points outside by > 3 sigma {outside} of {on_surface} ({} frames with any), worst {:.1} sigma; silhouette excess median {:.3} max {:.3} (in earlier views median {:.3} max {:.3}); {}",
         part(0..third),
         part(n - third..n),
         percentile(&seen, 0.5),
@@ -698,6 +702,8 @@ fn view_summary(id: &str, st: &StreamSummary) -> String {
         max(&all(|v| v.outside.worst_sigmas)),
         percentile(&excess, 0.5),
         max(&excess),
+        percentile(&past, 0.5),
+        max(&past),
         failed_rays(&rays),
     )
 }

@@ -37,6 +37,13 @@
 //!   [`crate::synth::view_metrics::silhouette_excess_of`]): the issue's "the
 //!   mesh's projection stays inside the object's silhouette in every view",
 //!   measured in the current one; phantom lobes and fins count here;
+//! - **silhouette excess in earlier views**: the same for the frame's mesh
+//!   seen from up to [`PAST_VIEWS`] of the stream's earlier views (evenly
+//!   spread since its mesh last changed, the oldest always among them),
+//!   each with the object at its true pose there (so tracking errors do not
+//!   count): the largest share over them. The issue asks that the mesh's
+//!   projection stay inside the silhouette in every view the model holds;
+//!   a lobe on a side the current camera does not look at shows here;
 //! - **coverage**: the share of the true surface (object frame,
 //!   [`COVERAGE_SAMPLES`] area-uniform samples) seen so far by the camera,
 //!   with the simulator's incidence cut-off [`COVERAGE_MAX_INCIDENCE_DEG`]
@@ -68,6 +75,10 @@ pub const COVERAGE_MAX_INCIDENCE_DEG: f64 = 80.0;
 pub const OUTSIDE_SIGMAS: f64 = 3.0;
 /// Seed of the coverage samples.
 const COVERAGE_SEED: u64 = 20;
+/// Most earlier views the silhouette excess is measured in per frame.
+pub const PAST_VIEWS: usize = 8;
+/// Most earlier views a stream's tracker keeps (the oldest go first).
+const KEPT_VIEWS: usize = 256;
 
 /// The robot's-view scores of one frame of one stream.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -91,6 +102,9 @@ pub struct ViewScore {
     /// The mesh's projection beyond the true silhouette, as a share of the
     /// silhouette (`None` when the camera does not see the object).
     pub silhouette_excess: Option<f64>,
+    /// The largest [`Self::silhouette_excess`] of this frame's mesh in the
+    /// stream's earlier views (`None` without one that sees the object).
+    pub past_silhouette_excess: Option<f64>,
 }
 
 impl ViewScore {
@@ -125,11 +139,13 @@ pub struct ViewFrame<'a> {
     pub tau_fraction: f64,
 }
 
-/// Per-stream state of the view scores: the tracked pose and the coverage.
+/// Per-stream state of the view scores: the tracked pose, the coverage and
+/// the earlier views (camera and true pose) since the mesh last changed.
 #[derive(Debug, Clone, Default)]
 pub struct ViewTracker {
     pose: Option<Isometry3<f64>>,
     coverage: Option<(usize, Coverage)>,
+    views: Vec<(crate::synth::Camera, Isometry3<f64>)>,
 }
 
 impl ViewTracker {
@@ -155,6 +171,7 @@ impl ViewTracker {
         };
         self.pose = Some(pose);
         let err = pose_error(&pose, &f.truth.pose);
+        let past_excess = self.past_excess(f)?;
         let coverage = self.coverage_after(f)?;
         let surface_error = self.coverage.as_ref().map_or(0.0, |(_, c)| {
             c.surface().pose_surface_error(&pose, &f.truth.pose)
@@ -168,7 +185,39 @@ impl ViewTracker {
             coverage,
             outside,
             silhouette_excess: excess.share(),
+            past_silhouette_excess: past_excess,
         })
+    }
+
+    /// The largest silhouette excess of `f`'s mesh in up to [`PAST_VIEWS`]
+    /// earlier views of the same true mesh (evenly spread, the oldest
+    /// among them), then remember this view.
+    fn past_excess(&mut self, f: &ViewFrame<'_>) -> Result<Option<f64>, RaycastError> {
+        let changed = self.coverage.as_ref().map(|c| c.0) != Some(f.truth.mesh);
+        if changed {
+            self.views.clear();
+        }
+        let (n, m) = (self.views.len(), PAST_VIEWS.min(self.views.len()));
+        let to_object = f.truth.pose.inverse();
+        let mut worst: Option<f64> = None;
+        for i in 0..m {
+            let (camera, pose) = &self.views[i * n / m];
+            let there = pose * to_object;
+            let (mesh, truth) = (
+                f.mesh.transformed(&there),
+                f.posed_truth.transformed(&there),
+            );
+            let (truth, mesh) = (CastMesh::new(&truth)?, CastMesh::new(&mesh)?);
+            let excess = TruthRays::new(camera, &truth, &mesh).silhouette_excess(&mesh);
+            if let Some(share) = excess.share() {
+                worst = Some(worst.map_or(share, |w| w.max(share)));
+            }
+        }
+        if self.views.len() == KEPT_VIEWS {
+            self.views.remove(0);
+        }
+        self.views.push((f.truth.camera, f.truth.pose));
+        Ok(worst)
     }
 
     /// Mark what this frame's camera sees of the true surface; restart on a

@@ -13,7 +13,7 @@
 
 use std::collections::BTreeMap;
 
-use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use thiserror::Error;
 
 use super::Camera;
@@ -116,11 +116,7 @@ impl TruthTrack {
     /// The ground-truth surface at `stamp_ns` (that frame's mesh moved by its pose).
     pub fn posed_mesh(&self, stamp_ns: i64) -> Option<TriMesh> {
         let f = self.frames.get(&stamp_ns)?;
-        let mut m = self.mesh_at(stamp_ns)?.1.clone();
-        for v in &mut m.vertices {
-            *v = (f.pose * Point3::from(*v)).coords;
-        }
-        Some(m)
+        Some(self.mesh_at(stamp_ns)?.1.transformed(&f.pose))
     }
 }
 
