@@ -145,7 +145,8 @@ pub struct ViewFrame<'a> {
 pub struct ViewTracker {
     pose: Option<Isometry3<f64>>,
     coverage: Option<(usize, Coverage)>,
-    views: Vec<(crate::synth::Camera, Isometry3<f64>)>,
+    /// The true mesh's index, and its views so far.
+    views: (usize, Vec<(crate::synth::Camera, Isometry3<f64>)>),
 }
 
 impl ViewTracker {
@@ -193,15 +194,16 @@ impl ViewTracker {
     /// earlier views of the same true mesh (evenly spread, the oldest
     /// among them), then remember this view.
     fn past_excess(&mut self, f: &ViewFrame<'_>) -> Result<Option<f64>, RaycastError> {
-        let changed = self.coverage.as_ref().map(|c| c.0) != Some(f.truth.mesh);
-        if changed {
-            self.views.clear();
+        let (mesh_index, views) = &mut self.views;
+        if *mesh_index != f.truth.mesh {
+            *mesh_index = f.truth.mesh;
+            views.clear();
         }
-        let (n, m) = (self.views.len(), PAST_VIEWS.min(self.views.len()));
+        let (n, m) = (views.len(), PAST_VIEWS.min(views.len()));
         let to_object = f.truth.pose.inverse();
         let mut worst: Option<f64> = None;
         for i in 0..m {
-            let (camera, pose) = &self.views[i * n / m];
+            let (camera, pose) = &views[i * n / m];
             let there = pose * to_object;
             let (mesh, truth) = (
                 f.mesh.transformed(&there),
@@ -213,10 +215,10 @@ impl ViewTracker {
                 worst = Some(worst.map_or(share, |w| w.max(share)));
             }
         }
-        if self.views.len() == KEPT_VIEWS {
-            self.views.remove(0);
+        if views.len() == KEPT_VIEWS {
+            views.remove(0);
         }
-        self.views.push((f.truth.camera, f.truth.pose));
+        views.push((f.truth.camera, f.truth.pose));
         Ok(worst)
     }
 
