@@ -6,7 +6,8 @@
 # orbited at other noise seeds), replayed with `sepmem replay -q`
 # and summarised (median last-third F, volume IoU, largest volume ratio, cold
 # frames after the first, share of visible points > 3 sigma outside, seen
-# side, and the tracked pose's ADD-S over the last third in mm).
+# side, the tracked pose's ADD-S over the last third in mm, and the largest
+# silhouette excess of a frame's mesh in earlier views).
 #
 #   benches/robot_view_eval.sh [OUT_DIR] [-- replay args, e.g. --set key=value]
 #
@@ -76,12 +77,14 @@ for f in sorted(glob.glob(sys.argv[1] + "/*.txt")):
     s = re.search(r"seen side median ([\d.]+)", t)
     # The tracked pose's ADD-S over the last third (mm).
     a = re.search(r"last third \(\d+\): [^;]*ADD-S ([\d.]+)", t)
-    if not (m and v and c and o and s and a):
+    # The largest silhouette excess of any frame's mesh in earlier views.
+    x = re.search(r"in earlier views median [\d.]+ max ([\d.]+)", t)
+    if not (m and v and c and o and s and a and x):
         missing.append(os.path.basename(f)); continue
     name = os.path.basename(f)[:-4]
-    r = (float(m[1]), float(m[2]), float(v[1]), int(c[2]) - 1, int(o[1]) / int(o[2]), float(s[1]), float(a[1]))
+    r = (float(m[1]), float(m[2]), float(v[1]), int(c[2]) - 1, int(o[1]) / int(o[2]), float(s[1]), float(a[1]), float(x[1]))
     rows[name] = r
-    print(f"{name:24} F {r[0]:.3f} IoU {r[1]:.3f} vmax {r[2]:.2f} cold {r[3]} out3 {r[4]:.3f} seen {r[5]:.3f} adds {r[6]:.2f}")
+    print(f"{name:24} F {r[0]:.3f} IoU {r[1]:.3f} vmax {r[2]:.2f} cold {r[3]} out3 {r[4]:.3f} seen {r[5]:.3f} adds {r[6]:.2f} pastex {r[7]:.3f}")
 groups = (
     ("tuned", lambda n: not n.startswith(("h_", "x_"))),
     ("held out", lambda n: n.startswith("h_")),
@@ -93,7 +96,7 @@ for label, keep in groups:
     if sel:
         med = lambda k: st.median(x[k] for x in sel)
         print(f"{label} ({len(sel)}): median F {med(0):.3f} (mean {st.mean(x[0] for x in sel):.3f}) IoU {med(1):.3f} "
-              f"vmax {med(2):.2f} cold {sum(x[3] for x in sel)} out3 {med(4):.3f} seen {med(5):.3f} adds {med(6):.2f} mm")
+              f"vmax {med(2):.2f} cold {sum(x[3] for x in sel)} out3 {med(4):.3f} seen {med(5):.3f} adds {med(6):.2f} mm pastex {med(7):.3f}")
 if missing:
     # The medians above leave these out: a replay that failed or whose
     # summary this script cannot read.
