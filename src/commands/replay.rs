@@ -613,8 +613,8 @@ fn view_score(
     Ok(Some(v))
 }
 
-/// The per-frame columns `seen rim IoU rot tr_mm adds cover out3s excess`
-/// (dashes without a score); `rim` is the seen side on the silhouette's
+/// The per-frame columns `seen rim IoU rot tr_mm adds cover out3s excess
+/// pastex` (dashes without a score); `rim` is the seen side on the silhouette's
 /// rim alone, `adds` the tracked pose's ADD-S in mm (the true surface's
 /// mean distance from itself placed by that pose: 0 for a turn about an
 /// axis of symmetry), `out3s` the share of the points on the true surface
@@ -648,8 +648,9 @@ fn view_columns(v: Option<&ViewScore>) -> String {
 /// volume IoU, pose error and coverage over the first and the last third
 /// of its scored frames (means), the median seen side over all frames
 /// (and on the silhouette's rim alone, and inside it), the largest pose
-/// error, the points left out, the silhouette excess (median and largest
-/// over the frames) and the seen side's failed rays by kind
+/// error (rotation, translation, ADD-S), the points left out, the
+/// silhouette excess in the current view and in earlier ones (median and
+/// largest over the frames) and the seen side's failed rays by kind
 /// ([`failed_rays`]).
 fn view_summary(id: &str, st: &StreamSummary) -> String {
     let n = st.views.len().min(st.scores.len());
