@@ -363,7 +363,15 @@ impl SeenExtent {
 ///
 /// A cloud that is no single view but comes with the free space of the
 /// views it was fused from ([`FreeSpace`]) is treated like a single view:
-/// beyond the grid only their seen-free space is outside.
+/// beyond the grid only their seen-free space is outside. Inside the grid
+/// the label stands even where a view saw empty but the flood fill found
+/// the cell enclosed: taking that space for outside too carved the phantom
+/// of a turning bent tube (its samples in seen-free space fell from 10-16 %
+/// to under 1 % within a frame's four iterations), but over the 45 sequences
+/// of `benches/robot_view_eval.sh` the mean last-third F fell 0.833 ->
+/// 0.823 and the median share of visible points more than 3σ outside rose
+/// 0.2 % -> 0.6 %: under the tracked pose's error, free space next to the
+/// surface cuts into the object.
 pub fn outside_at(grid: &OutsideGrid, seen: Seen<'_>, p: &Vec3) -> bool {
     grid.label(p).unwrap_or_else(|| seen.may_be_outside(p))
 }
