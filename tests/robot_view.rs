@@ -101,16 +101,22 @@ fn assert_meshed_within_the_cap(name: &str, out: &str) {
     assert!(held > 0.0 && held <= cap, "{name}: {model}");
 }
 
+/// The line of `out` that starts with `prefix`, from its first `mark` on.
+fn part<'a>(out: &'a str, prefix: &str, mark: &str) -> &'a str {
+    let l = line(out, prefix);
+    l.find(mark)
+        .map(|i| &l[i..])
+        .unwrap_or_else(|| panic!("no `{mark}` in {l}"))
+}
+
 /// (last-third F, last-third volume IoU, largest volume ratio) of
 /// `out`'s one stream.
 fn closure(out: &str) -> (f64, f64, f64) {
-    let view = line(out, "view ");
-    let last = &view[view.find("last third").unwrap()..];
-    let score = line(out, "score ");
+    let last = part(out, "view ", "last third");
     (
         figure(last, "last third (10): F "),
         figure(last, "IoU "),
-        figure(&score[score.find("volume ratio").unwrap()..], " max "),
+        figure(part(out, "score ", "volume ratio"), " max "),
     )
 }
 
@@ -155,8 +161,7 @@ fn the_carved_model_closes_the_box_capsule_and_bent_tube() {
         // silhouette in every frame. Measured: box 0.038, capsule 0.020,
         // bent tube 0.058, orbited 0.052 (the turning YCB banana, whose
         // cold membranes grow fins over its concave side: 0.176).
-        let view = line(&out, "view ");
-        let excess = figure(&view[view.find("silhouette excess").unwrap()..], " max ");
+        let excess = figure(part(&out, "view ", "silhouette excess"), " max ");
         assert!(excess <= 0.1, "{name}: silhouette excess up to {excess}");
     }
 }
@@ -224,8 +229,7 @@ fn solids_of_revolution_are_completed_and_their_lobes_carved() {
 /// true surface it places stays where it is (ADD-S). Measured, last third:
 /// capsule 160° and 0.74 mm, can 83° and 1.07 mm.
 fn assert_turns_unseen_about_its_axis(name: &str, out: &str) {
-    let view = line(out, "view ");
-    let last = &view[view.find("last third").unwrap()..];
+    let last = part(out, "view ", "last third");
     let (rot, adds) = (figure(last, " rot "), figure(last, " ADD-S "));
     assert!(
         rot > 45.0 && adds < 2.0,
@@ -255,8 +259,7 @@ fn a_turning_ball_is_completed_as_a_sphere() {
 
 /// The share of the frames' visible points more than 3σ outside the mesh.
 fn outside_share(out: &str) -> f64 {
-    let view = line(out, "view ");
-    let counts = &view[view.find("outside by > 3 sigma ").unwrap()..];
+    let counts = part(out, "view ", "outside by > 3 sigma ");
     figure(counts, "3 sigma ") / figure(counts, " of ")
 }
 
@@ -342,8 +345,7 @@ fn the_fused_completion_closes_the_orbited_bent_tube() {
 /// (last-third F, last-third rotation error in degrees, last-third ADD-S
 /// in mm) of `out`'s one stream.
 fn tracked(out: &str) -> (f64, f64, f64) {
-    let view = line(out, "view ");
-    let last = &view[view.find("last third").unwrap()..];
+    let last = part(out, "view ", "last third");
     (
         figure(last, "last third (10): F "),
         figure(last, " rot "),
@@ -448,8 +450,7 @@ fn the_published_seen_side_lies_on_the_frames_points() {
 
 /// The smallest volume ratio over `out`'s frames (mesh over true volume).
 fn smallest_volume(out: &str) -> f64 {
-    let score = line(out, "score ");
-    figure(&score[score.find("volume ratio").unwrap()..], "min ")
+    figure(part(out, "score ", "volume ratio"), "min ")
 }
 
 #[test]
@@ -554,8 +555,7 @@ fn the_background_rebuild_restarts_the_warm_chain_from_a_cold_membrane_on_the_mo
 
 /// The seen side's share of the last third (the `view` line).
 fn last_third_seen(out: &str) -> f64 {
-    let view = line(out, "view ");
-    figure(&view[view.find("last third").unwrap()..], "seen side ")
+    figure(part(out, "view ", "last third"), "seen side ")
 }
 
 #[test]
