@@ -300,10 +300,7 @@ pub fn run_opts(
         }
     }
     if scored {
-        header += &format!(
-            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
-            "seen", "rim", "IoU", "rot", "tr_mm", "adds", "cover", "out3s", "excess", "pastex"
-        );
+        header.extend(VIEW_COLUMNS.map(|c| format!(" {c:>6}")));
     }
     print(header);
     let (mut latencies, mut warm_it, mut cold_it) = (Vec::new(), Vec::new(), Vec::new());
@@ -613,8 +610,12 @@ fn view_score(
     Ok(Some(v))
 }
 
-/// The per-frame columns `seen rim IoU rot tr_mm adds cover out3s excess
-/// pastex` (dashes without a score); `rim` is the seen side on the silhouette's
+/// The names of the per-frame columns of [`view_columns`], in order.
+const VIEW_COLUMNS: [&str; 10] = [
+    "seen", "rim", "IoU", "rot", "tr_mm", "adds", "cover", "out3s", "excess", "pastex",
+];
+
+/// The per-frame columns [`VIEW_COLUMNS`] (dashes without a score); `rim` is the seen side on the silhouette's
 /// rim alone, `adds` the tracked pose's ADD-S in mm (the true surface's
 /// mean distance from itself placed by that pose: 0 for a turn about an
 /// axis of symmetry), `out3s` the share of the points on the true surface
@@ -637,10 +638,7 @@ fn view_columns(v: Option<&ViewScore>) -> String {
             opt(v.silhouette_excess),
             opt(v.past_silhouette_excess)
         ),
-        None => format!(
-            " {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}",
-            "-", "-", "-", "-", "-", "-", "-", "-", "-", "-"
-        ),
+        None => format!(" {:>6}", "-").repeat(VIEW_COLUMNS.len()),
     }
 }
 

@@ -51,6 +51,7 @@
 //!   (an object swap).
 
 use nalgebra::Isometry3;
+use std::collections::VecDeque;
 
 use crate::cloud::Vec3;
 use crate::mesh::TriMesh;
@@ -146,7 +147,7 @@ pub struct ViewTracker {
     pose: Option<Isometry3<f64>>,
     coverage: Option<(usize, Coverage)>,
     /// The true mesh's index, and its views so far.
-    views: (usize, Vec<(crate::synth::Camera, Isometry3<f64>)>),
+    views: (usize, VecDeque<(crate::synth::Camera, Isometry3<f64>)>),
 }
 
 impl ViewTracker {
@@ -216,9 +217,9 @@ impl ViewTracker {
             }
         }
         if views.len() == KEPT_VIEWS {
-            views.remove(0);
+            views.pop_front();
         }
-        views.push((f.truth.camera, f.truth.pose));
+        views.push_back((f.truth.camera, f.truth.pose));
         Ok(worst)
     }
 
