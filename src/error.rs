@@ -1,7 +1,7 @@
 //! Crate-level error type.
 //!
 //! Each module defines its own `thiserror` enum that names the failing input
-//! and the problem; [`Error`] wraps them so that callers that cross module
+//! and the problem; [`Error`](enum@Error) wraps them so that callers that cross module
 //! boundaries (the CLI, the frame pipeline, the node) can use one type.
 //! Errors are reported exactly once, by whoever handles them.
 
@@ -27,5 +27,5 @@ pub enum Error {
     PointCloud2(#[from] crate::wire::pointcloud2::PointCloud2Error),
 }
 
-/// Result alias using the crate-level [`Error`].
+/// Result alias using the crate-level [`Error`](enum@Error).
 pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -1,4 +1,4 @@
-//! Markdown rendering of a [`BenchReport`](super::BenchReport): one table per
+//! Markdown rendering of a [`super::BenchReport`]: one table per
 //! section, laid out like the paper's Table 1 (Chamfer-L1, F-score, normal
 //! consistency, time).
 

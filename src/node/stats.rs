@@ -53,7 +53,7 @@ impl LatencyWindow {
         self.values.is_empty()
     }
 
-    /// The `q`-quantile (nearest rank, `q` in [0,1]); `None` when empty.
+    /// The `q`-quantile (nearest rank, `q` in `[0, 1]`); `None` when empty.
     pub fn quantile(&self, q: f64) -> Option<f64> {
         quantile(&self.values, q)
     }

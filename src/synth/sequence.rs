@@ -15,7 +15,7 @@
 //! 1, 2, …; outliers carry label 0). The ground truth of every object in
 //! every frame goes to [`GROUND_TRUTH_TOPIC`] as a
 //! `sepmem_msgs/msg/GroundTruth` whose `stream_id` is the
-//! [`StreamKey`](crate::stream::StreamKey) of the stream the object lands
+//! [`crate::stream::StreamKey`] of the stream the object lands
 //! in (`topic` or `topic#label`) and whose stamp equals the cloud's. It
 //! carries the object pose in the camera frame, the camera pose in the world
 //! frame, the camera intrinsics and the mesh id; the mesh itself (in the
