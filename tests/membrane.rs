@@ -299,6 +299,23 @@ fn non_uniform_density_is_followed_by_the_local_spacing() {
     }
 }
 
+/// A few points far off an object (stray returns 10⁶ m away) are outliers,
+/// not a reason to call the object flat: the spread check runs after the
+/// outlier filter. Before, their spread dwarfed the sphere's and the cloud
+/// was refused as "degenerate: it lies on a plane or a line".
+#[test]
+fn far_stray_points_do_not_make_an_object_read_as_flat() {
+    let a = Vec3::repeat(0.5);
+    let mut pts = ellipsoid(3_000, a, Vec3::zeros(), 5);
+    pts.extend((0..5).map(|i| Vec3::new(1e6, 1e6 + f64::from(i), -1e6)));
+    let cloud = PointCloud::from_points(pts);
+    let rec = reconstruct(&cloud, &serial(), &Budget::unlimited(), None).unwrap();
+    check_mesh(&rec.mesh);
+    assert!(rec.report.points_outliers >= 5, "{:?}", rec.report);
+    let f = score(&rec.mesh, &ellipsoid(100_000, a, Vec3::zeros(), 97));
+    assert!(f >= 0.95, "sphere with far stray points: F = {f}");
+}
+
 /// The paper's robustness sweep on a unit-diameter sphere: 1,000 surface
 /// points (sampling `seed`) plus 1,000 duplicates perturbed with N(0, σ²)
 /// per coordinate. Returns the F-score of the reconstruction.

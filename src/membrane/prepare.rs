@@ -159,8 +159,8 @@ struct Usable {
     thinned: usize,
 }
 
-/// The [`Usable`] points of `cloud`, or why there are too few, or they
-/// span no volume.
+/// The [`Usable`] points of `cloud`, or why there are too few (whether
+/// they span a volume is checked after the outlier filter).
 fn usable(cloud: &PointCloud, p: &PrepareConfig) -> Result<Usable, MembraneError> {
     let (finite_idx, non_finite) = finite_distinct(cloud);
     let duplicate = cloud.len() - non_finite - finite_idx.len();
@@ -182,7 +182,6 @@ fn usable(cloud: &PointCloud, p: &PrepareConfig) -> Result<Usable, MembraneError
         }
         .into());
     }
-    crate::cloud::check_spread(&points)?;
     Ok(Usable {
         idx,
         points,
@@ -238,6 +237,10 @@ pub(crate) fn prepare<'a>(
     };
     let points: Vec<Vec3> = keep.iter().map(|&k| finite[k]).collect();
     let outliers = finite.len() - points.len();
+    // After the outlier filter: a few points far off an object (a flying
+    // pixel, a stray return) would otherwise dwarf its spread and make it
+    // read as flat.
+    crate::cloud::check_spread(&points)?;
     let e = Aabb::from_points(&points).extent();
     let scale = e.max();
     if scale.is_nan() || scale <= 0.0 || e.min() < 1e-6 * scale {
