@@ -45,6 +45,7 @@ pub mod bench;
 pub mod cloud;
 pub mod config;
 pub mod density;
+pub mod detached;
 pub mod error;
 pub mod eval;
 pub mod gnomonic;

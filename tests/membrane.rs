@@ -309,11 +309,48 @@ fn far_stray_points_do_not_make_an_object_read_as_flat() {
     let mut pts = ellipsoid(3_000, a, Vec3::zeros(), 5);
     pts.extend((0..5).map(|i| Vec3::new(1e6, 1e6 + f64::from(i), -1e6)));
     let cloud = PointCloud::from_points(pts);
-    let rec = reconstruct(&cloud, &serial(), &Budget::unlimited(), None).unwrap();
+    let truth = ellipsoid(100_000, a, Vec3::zeros(), 97);
+    // The outlier filter drops them when the detached-group filter (which
+    // drops them first by default) is off.
+    let mut outliers_only = serial();
+    outliers_only.prepare.detached = None;
+    let rec = reconstruct(&cloud, &outliers_only, &Budget::unlimited(), None).unwrap();
     check_mesh(&rec.mesh);
     assert!(rec.report.points_outliers >= 5, "{:?}", rec.report);
-    let f = score(&rec.mesh, &ellipsoid(100_000, a, Vec3::zeros(), 97));
+    let f = score(&rec.mesh, &truth);
     assert!(f >= 0.95, "sphere with far stray points: F = {f}");
+    let rec = reconstruct(&cloud, &serial(), &Budget::unlimited(), None).unwrap();
+    assert_eq!(rec.report.points_detached, 5, "{:?}", rec.report);
+    let f = score(&rec.mesh, &truth);
+    assert!(f >= 0.95, "sphere with far stray points, detached: F = {f}");
+}
+
+/// A dense group of points far off the object (a mask that bled onto the
+/// wall behind it: 600 points on a patch 2.4 diameters away) is no
+/// outlier, point by point, but it is detached from the object's body, and
+/// the membrane wraps the object alone (`membrane.prepare.detached`).
+/// Without that filter the membrane wraps both (F 0.000, checked below).
+#[test]
+fn a_group_of_points_detached_from_the_object_is_dropped() {
+    let a = Vec3::repeat(0.5);
+    let mut pts = ellipsoid(3_000, a, Vec3::zeros(), 5);
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    pts.extend((0..600).map(|_| {
+        let (u, v): (f64, f64) = (rng.random_range(-0.1..0.1), rng.random_range(-0.1..0.1));
+        Vec3::new(3.0 + u, v, 0.3)
+    }));
+    let cloud = PointCloud::from_points(pts);
+    let truth = ellipsoid(100_000, a, Vec3::zeros(), 97);
+    let rec = reconstruct(&cloud, &serial(), &Budget::unlimited(), None).unwrap();
+    check_mesh(&rec.mesh);
+    assert_eq!(rec.report.points_detached, 600, "{:?}", rec.report);
+    let f = score(&rec.mesh, &truth);
+    assert!(f >= 0.95, "sphere with a detached patch: F = {f}");
+    let mut keep = serial();
+    keep.prepare.detached = None;
+    let rec = reconstruct(&cloud, &keep, &Budget::unlimited(), None).unwrap();
+    let f = score(&rec.mesh, &truth);
+    assert!(f < 0.5, "the patch kept: F = {f}");
 }
 
 /// The paper's robustness sweep on a unit-diameter sphere: 1,000 surface

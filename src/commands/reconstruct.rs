@@ -53,13 +53,18 @@ pub fn run(
     }
     let t = &r.times;
     println!(
-        "{}: points in {} used {} dropped {} (non-finite {}, duplicates {}, outliers {}); grid {}x{}; iterations {}; eta_g {:.4}; stop {}; {:.1} ms (prepare {:.1}, init {:.1}, search {:.1}, fit {:.1}, mesh {:.1}, other pole axes {:.1}; pole axis {} of {} tried) -> {}",
+        "{}: points in {} used {} dropped {} (non-finite {}, duplicates {}, detached {}, outliers {}); grid {}x{}; iterations {}; eta_g {:.4}; stop {}; {:.1} ms (prepare {:.1}, init {:.1}, search {:.1}, fit {:.1}, mesh {:.1}, other pole axes {:.1}; pole axis {} of {} tried) -> {}",
         input.display(),
         r.points_in + read_dropped,
         r.points_used,
-        read_dropped + r.points_non_finite + r.points_duplicate + r.points_outliers,
+        read_dropped
+            + r.points_non_finite
+            + r.points_duplicate
+            + r.points_detached
+            + r.points_outliers,
         read_dropped + r.points_non_finite,
         r.points_duplicate,
+        r.points_detached,
         r.points_outliers,
         r.grid[0],
         r.grid[1],

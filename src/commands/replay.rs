@@ -310,6 +310,8 @@ pub fn run_opts(
     let mut warm_own = Vec::new();
     let mut waits = Vec::new();
     let (mut bad_samples, mut failed) = (0usize, 0usize);
+    // Points dropped as detached from their object's body, and in how many frames.
+    let (mut detached, mut detached_frames) = (0usize, 0usize);
     for m in &messages {
         bar.inc(1);
         let now = i64::try_from(m.log_time).unwrap_or(i64::MAX);
@@ -327,6 +329,9 @@ pub fn run_opts(
             match &pr.outcome {
                 Ok(r) => {
                     latencies.push(r.latency_ms);
+                    let dropped = r.reconstruction.report.points_detached;
+                    detached += dropped;
+                    detached_frames += usize::from(dropped > 0);
                     match r.path {
                         StartPath::Warm => {
                             warm_it.push(r.iterations as f64);
@@ -509,6 +514,11 @@ pub fn run_opts(
             "no deadline (deterministic; --realtime applies pipeline.deadline_ms)".to_string()
         },
     );
+    if detached > 0 {
+        println!(
+            "detached: {detached} points dropped in {detached_frames} frames, away from their object's main body (membrane.prepare.detached)"
+        );
+    }
     for (id, st) in &per_stream {
         if let (Some(b), Some(m)) = (st.model_bytes_max, &p.model) {
             println!(

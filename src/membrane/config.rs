@@ -111,6 +111,12 @@ pub struct PrepareConfig {
     /// ([`super::spacing`], on by default; the weighted mode keeps only the
     /// filter); `None`: the global δ everywhere.
     pub local_spacing: Option<LocalSpacingConfig>,
+    /// Drop groups of points detached from the object's main body (a mask
+    /// that bled onto the background, a label shared by two objects) before
+    /// anything else looks at the points ([`crate::detached`]; the frame
+    /// pipeline applies it to each object's cloud before tracking); `None`
+    /// keeps them.
+    pub detached: Option<crate::detached::DetachedConfig>,
 }
 
 /// `membrane.prepare.local_spacing`: the density-robust spacing of the
@@ -147,6 +153,7 @@ impl Default for PrepareConfig {
             delta_quantile: 0.25,
             delta_scale: 1.3,
             local_spacing: Some(LocalSpacingConfig::default()),
+            detached: Some(crate::detached::DetachedConfig::default()),
         }
     }
 }
@@ -877,6 +884,11 @@ fn validate_prepare(p: &PrepareConfig) -> Result<(), ConfigError> {
             .is_none_or(|l| l.tolerance >= 1.0 && l.tolerance.is_finite()),
         "prepare.local_spacing.tolerance",
         "must be a finite factor of at least 1",
+    )?;
+    check(
+        p.detached.as_ref().is_none_or(|d| pos(d.gap)),
+        "prepare.detached.gap",
+        "must be a positive share of the body's diagonal (null keeps detached points)",
     )
 }
 

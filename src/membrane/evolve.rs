@@ -313,6 +313,7 @@ fn finish(
         points_non_finite: c.non_finite,
         points_duplicate: c.duplicate,
         points_thinned: c.thinned,
+        points_detached: c.detached,
         points_outliers: c.outliers,
         points_used: prep.points.len(),
         points_completed: c.completed,

@@ -201,6 +201,9 @@ pub struct Report {
     pub points_duplicate: usize,
     /// Points left out by the `prepare.max_points` subsample.
     pub points_thinned: usize,
+    /// Points dropped as detached from the object's main body
+    /// (`prepare.detached`, [`crate::detached`]).
+    pub points_detached: usize,
     /// Points dropped by the k-NN outlier filter.
     pub points_outliers: usize,
     /// Points the membrane used (including the completion points).

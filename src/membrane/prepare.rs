@@ -1,6 +1,7 @@
 //! What the evolution needs from a cloud, prepared once per reconstruction
 //! (and shared by its pole-axis candidates): the finite, distinct points,
-//! thinned to `prepare.max_points`; the k-NN outlier filter; the point spacing δ
+//! thinned to `prepare.max_points`, without the groups detached from the
+//! object's main body ([`crate::detached`]); the k-NN outlier filter; the point spacing δ
 //! (paper Eq. 5); a single view's viewpoint and mirrored completion; the
 //! spatial index of the search; the attribute channels of the weighted
 //! separability (Eq. 9); the occupancy grid of the inward force.
@@ -29,6 +30,7 @@ use super::view::{self, Seen};
 use super::MembraneError;
 use crate::cloud::{Aabb, CloudError, PointCloud, Vec3};
 use crate::density::{median_of, Density};
+use crate::detached;
 use crate::separability::attribute::{AttributeSet, AttributeWeights, ChannelWeight};
 use crate::separability::grid::SpatialIndex;
 use crate::spatial::KnnIndex;
@@ -85,6 +87,7 @@ pub(crate) struct PointCounts {
     pub(crate) non_finite: usize,
     pub(crate) duplicate: usize,
     pub(crate) thinned: usize,
+    pub(crate) detached: usize,
     pub(crate) outliers: usize,
     pub(crate) completed: usize,
 }
@@ -157,6 +160,7 @@ struct Usable {
     non_finite: usize,
     duplicate: usize,
     thinned: usize,
+    detached: usize,
 }
 
 /// The [`Usable`] points of `cloud`, or why there are too few (whether
@@ -170,7 +174,14 @@ fn usable(cloud: &PointCloud, p: &PrepareConfig) -> Result<Usable, MembraneError
         None => finite_idx,
     };
     let thinned = finite_len - idx.len();
-    let points: Vec<Vec3> = idx.iter().map(|&i| cloud.points[i]).collect();
+    let mut points: Vec<Vec3> = idx.iter().map(|&i| cloud.points[i]).collect();
+    let mut idx = idx;
+    let body = p.detached.as_ref().and_then(|d| detached::body(&points, d));
+    if let Some(body) = body {
+        idx.retain(|&i| body.contains(&cloud.points[i]));
+        points.retain(|q| body.contains(q));
+    }
+    let detached = finite_len - thinned - idx.len();
     if points.is_empty() {
         return Err(CloudError::Empty.into());
     }
@@ -188,6 +199,7 @@ fn usable(cloud: &PointCloud, p: &PrepareConfig) -> Result<Usable, MembraneError
         non_finite,
         duplicate,
         thinned,
+        detached,
     })
 }
 
@@ -224,6 +236,7 @@ pub(crate) fn prepare<'a>(
         non_finite,
         duplicate,
         thinned,
+        detached,
     } = usable(cloud, p)?;
     // The frame's one k-NN index: d_i, δ and the outlier filter.
     let knn = KnnIndex::new(finite);
@@ -302,6 +315,7 @@ pub(crate) fn prepare<'a>(
             non_finite,
             duplicate,
             thinned,
+            detached,
             outliers,
             completed,
         },

@@ -692,8 +692,10 @@ impl Tracker {
                 min: cfg.min_points.max(4),
             });
         }
-        let raw = cloud;
-        let cloud = &*thinned(raw, cfg);
+        let thin = thinned(cloud, cfg);
+        let detached = membranes.cold.config().prepare.detached.as_ref();
+        let (raw, thin, detached) = without_detached(cloud, thin, detached, cfg);
+        let (raw, cloud) = (&*raw, &*thin);
         let Deadlines {
             warm: deadline,
             cold: cold_deadline,
@@ -866,6 +868,7 @@ impl Tracker {
         // The published mesh without the centring's curvature bias; the
         // alignment above and the next warm start keep the surface's own.
         rec.unbias_mesh();
+        rec.report.points_detached += detached;
         // Its seen side on the frame's own points (`pipeline.snap`).
         snap::apply(
             &mut rec,
@@ -1295,6 +1298,33 @@ pub fn thinned_subset<'a>(
     subset: u64,
 ) -> Cow<'a, PointCloud> {
     cloud.thinned(cfg.max_points, subset)
+}
+
+/// `raw` without the groups of points detached from the object's main
+/// body ([`crate::detached`], with the membrane's `prepare.detached`),
+/// found on its `thin`ned points, and those thinned again (the cloud the
+/// frame tracks), so that tracking and the fused model see the object
+/// alone; and how many finite points of `raw` went.
+fn without_detached<'a>(
+    raw: &'a PointCloud,
+    thin: Cow<'a, PointCloud>,
+    detached: Option<&crate::detached::DetachedConfig>,
+    cfg: &PipelineConfig,
+) -> (Cow<'a, PointCloud>, Cow<'a, PointCloud>, usize) {
+    let Some(body) = detached.and_then(|d| crate::detached::body(&thin.points, d)) else {
+        return (Cow::Borrowed(raw), thin, 0);
+    };
+    let finite = |p: &&Vec3| p.iter().all(|c| c.is_finite());
+    let dropped = raw
+        .points
+        .iter()
+        .filter(finite)
+        .filter(|p| !body.contains(p))
+        .count();
+    let mut kept = raw.clone();
+    kept.retain_indices(|i| body.contains(&raw.points[i]));
+    let thin = Cow::Owned(thinned(&kept, cfg).into_owned());
+    (Cow::Owned(kept), thin, dropped)
 }
 
 /// Iteration cap of a cold start: `pipeline.cold_max_iterations`, or the
