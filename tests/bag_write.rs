@@ -846,6 +846,7 @@ fn every_committed_sepmem_bag_holds_metadata_that_rosbag2_reads() {
             "tests/data/bags/robot_view/turn_bottle.mcap",
             "tests/data/bags/robot_view/turn_can.mcap",
             "tests/data/bags/robot_view/turn_capsule.mcap",
+            "tests/data/bags/robot_view/turn_capsule_faults.mcap",
             "tests/data/bags/robot_view/turn_rounded_box.mcap",
             "tests/data/bags/robot_view/turn_sphere.mcap",
             "tests/data/bags/robot_view/turn_ycb_banana.mcap",

@@ -133,6 +133,19 @@ pub struct ModelParams {
     pub reset_share: f64,
     /// ... but only when the view judged at least this many voxels.
     pub reset_min_voxels: usize,
+    /// Which voxels count as observed ([`voxels::VoxelMemory::confirmed`]);
+    /// `None`: every voxel.
+    pub confirm: Option<ConfirmParams>,
+}
+
+/// `pipeline.model.confirm`: an earlier frame's voxel counts among the fused
+/// points once this many frames hit it, or while it touches one that was
+/// (the current frame's voxels always count).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConfirmParams {
+    /// Frames that must hit a voxel (at least 2).
+    pub min_hits: u16,
 }
 
 impl Default for ModelParams {
@@ -149,6 +162,7 @@ impl Default for ModelParams {
             forget_after: 2,
             reset_share: 0.5,
             reset_min_voxels: 50,
+            confirm: Some(ConfirmParams { min_hits: 2 }),
         }
     }
 }
@@ -192,6 +206,12 @@ impl TryFrom<ModelParams> for ModelConfig {
         }
         if r.forget_after == 0 {
             return Err(bad("forget_after", "must be at least 1"));
+        }
+        if r.confirm.is_some_and(|c| c.min_hits < 2) {
+            return Err(bad(
+                "confirm.min_hits",
+                "must be at least 2 (null counts every voxel)",
+            ));
         }
         if !(8..=2048).contains(&r.view_side) {
             return Err(bad("view_side", "must be in [8, 2048] bins"));
@@ -346,13 +366,20 @@ impl ObjectModel {
 
     /// The fused points (one per voxel), in the object's frame.
     pub fn points(&self) -> Vec<Vec3> {
-        self.memory.iter().map(|v| v.position()).collect()
+        self.observed().map(|v| v.position()).collect()
+    }
+
+    /// The confirmed voxels ([`voxels::VoxelMemory::confirmed`]), or all.
+    fn observed(&self) -> Box<dyn Iterator<Item = &voxels::Voxel> + '_> {
+        match self.cfg.0.confirm {
+            Some(c) => Box::new(self.memory.confirmed(self.frame, c.min_hits)),
+            None => Box::new(self.memory.iter()),
+        }
     }
 
     /// The fused points moved into the sensor's frame by `object_to_sensor`.
     pub fn points_in(&self, object_to_sensor: &Rigid) -> Vec<Vec3> {
-        self.memory
-            .iter()
+        self.observed()
             .map(|v| {
                 object_to_sensor
                     .transform_point(&v.position().into())

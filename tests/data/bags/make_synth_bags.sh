@@ -36,3 +36,10 @@ done
 "$SEPMEM" synth -o "$R/orbit_bent_tube.mcap" --shapes bent_tube --motion orbit $CAM --mesh-res 32 --seed 7 --quiet
 "$SEPMEM" synth -o "$R/orbit_ycb_banana.mcap" --shapes "$YCB/YcbBanana.obj" --motion orbit $CAM --seed 8 --quiet
 "$SEPMEM" synth -o "$R/swap.mcap" --shapes rounded_box,bottle,mug --motion swap $CAM --mesh-res 48 --seed 4 --quiet
+# (e) a real sensor's faults: the capsule turning as in (d), with the Kinect model's
+#     1 % outliers and flying pixels on 30 % of the depth edges' pixels.
+"$SEPMEM" synth -o "$R/turn_capsule_faults.mcap" --shapes capsule --motion turn \
+    --width 480 --height 360 --focal 393.75 --distance 1.0 --noise kinect --frames 30 \
+    --degrees 180 --flying-pixels 0.3 --mesh-res 32 --seed 4 --quiet
+# (f) turn_capsule_detached.mcap, the first 10 frames of turn_capsule.mcap with a patch of
+#     points 0.6 m behind the capsule: tests/python/add_detached.py (Python rosbags).
