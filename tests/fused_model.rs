@@ -48,30 +48,19 @@ fn second_mesh_distance(model: bool, first: &[Vec3], second: &[Vec3], probe: &[V
     cfg.pipeline.icp_min_inliers = None;
     let membranes = Membranes::new(&cfg.membrane, &cfg.pipeline).unwrap();
     let mut t = Tracker::new(StreamKey::topic("/fused"));
-    let a = t
-        .process(
-            &PointCloud::from_points(first.to_vec()),
-            &membranes,
-            &cfg.pipeline,
-        )
-        .unwrap();
-    assert_eq!(a.path, StartPath::Cold);
-    let again = t
-        .process(
-            &PointCloud::from_points(first.to_vec()),
-            &membranes,
-            &cfg.pipeline,
-        )
-        .unwrap();
-    assert_eq!(again.path, StartPath::Warm, "{:?}", again.reason);
-    let b = t
-        .process(
-            &PointCloud::from_points(second.to_vec()),
-            &membranes,
-            &cfg.pipeline,
-        )
-        .unwrap();
-    assert_eq!(b.path, StartPath::Warm, "{:?}", b.reason);
+    let frames = [
+        (first, StartPath::Cold),
+        (first, StartPath::Warm),
+        (second, StartPath::Warm),
+    ];
+    let mut last = None;
+    for (points, path) in frames {
+        let cloud = PointCloud::from_points(points.to_vec());
+        let r = t.process(&cloud, &membranes, &cfg.pipeline).unwrap();
+        assert_eq!(r.path, path, "{:?}", r.reason);
+        last = Some(r);
+    }
+    let b = last.unwrap();
     let index = PointIndex::new(&b.reconstruction.mesh.vertices);
     probe.iter().map(|p| index.nearest(p).0).sum::<f64>() / probe.len() as f64
 }
