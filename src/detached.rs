@@ -34,6 +34,7 @@
 //! separate what touches, nor a bleed nearer than the object's size.
 
 use crate::cloud::Vec3;
+use crate::spatial::CELL_NEIGHBOURS;
 use ahash::AHashMap;
 use serde::{Deserialize, Serialize};
 
@@ -142,9 +143,9 @@ fn cell_of(p: &Vec3, origin: Vec3, cell: f64) -> Option<[i64; 3]> {
 
 /// The 26 cells around `c`.
 fn neighbours(c: [i64; 3]) -> impl Iterator<Item = [i64; 3]> {
-    (0..27)
-        .filter(|&i| i != 13)
-        .map(move |i| [c[0] + i % 3 - 1, c[1] + (i / 3) % 3 - 1, c[2] + i / 9 - 1])
+    CELL_NEIGHBOURS
+        .map(|o| [0, 1, 2].map(|k| c[k] + i64::from(o[k])))
+        .into_iter()
 }
 
 /// Each occupied cell's group: cells that touch (26-neighbourhood) share

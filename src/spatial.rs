@@ -25,6 +25,23 @@ use rstar::primitives::GeomWithData;
 use rstar::RTree;
 use std::num::NonZero;
 
+/// The offsets of the 26 cells around a cell of a regular 3D grid (its
+/// 26-neighbourhood), for grids keyed by integer cell coordinates.
+pub const CELL_NEIGHBOURS: [[i32; 3]; 26] = cell_neighbours();
+
+const fn cell_neighbours() -> [[i32; 3]; 26] {
+    let mut out = [[0; 3]; 26];
+    let (mut i, mut n) = (0, 0);
+    while i < 27 {
+        if i != 13 {
+            out[n] = [i % 3 - 1, (i / 3) % 3 - 1, i / 9 - 1];
+            n += 1;
+        }
+        i += 1;
+    }
+    out
+}
+
 /// A k-d tree over a finite point set, for k-nearest-neighbour queries of
 /// points in or near the set (see the module docs).
 #[derive(Debug, Clone)]

@@ -35,6 +35,7 @@
 //! ellipsoid turned 360° −0.25); `min_hits` alone, 0.756.
 
 use crate::cloud::Vec3;
+use crate::spatial::CELL_NEIGHBOURS;
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, DefaultHasher};
 
@@ -201,8 +202,8 @@ impl VoxelMemory {
 
     /// True when a voxel around `k` (its 26 neighbours) is `firm`.
     fn touches(&self, k: &VoxelKey, firm: impl Fn(&Voxel) -> bool) -> bool {
-        (0..27).filter(|&i| i != 13).any(|i| {
-            let n = [k[0] + i % 3 - 1, k[1] + (i / 3) % 3 - 1, k[2] + i / 9 - 1];
+        CELL_NEIGHBOURS.iter().any(|o| {
+            let n = [k[0] + o[0], k[1] + o[1], k[2] + o[2]];
             self.voxels.get(&n).is_some_and(&firm)
         })
     }

@@ -706,7 +706,8 @@ impl Tracker {
         let rebuilds = membranes.rebuild.is_some();
         let (path, mut reason, mut warm, motion) =
             self.choose_path(cloud, centroid, size, cfg, rebuilds);
-        let fused = self.fuse(raw, path, motion, size, cfg);
+        let fused_all = self.fuse(raw, path, motion, size, cfg);
+        let mut model_restarted = false;
         let mut rebuild_wait = Duration::ZERO;
         if let Some(w) = warm.as_mut() {
             let fit = cfg
@@ -726,7 +727,7 @@ impl Tracker {
         } else {
             self.rebuild = None;
         }
-        let fused = fused.as_ref().map(|c| thinned(c, cfg));
+        let fused = fused_all.as_ref().map(|c| thinned(c, cfg));
         let input: &PointCloud = fused.as_deref().unwrap_or(cloud);
         let cap = match path {
             StartPath::Warm => cfg.warm_max_iterations.max(1),
@@ -813,6 +814,7 @@ impl Tracker {
                         final_path = StartPath::Cold;
                         rec = cold;
                         self.restart_fused(raw, size, cfg);
+                        model_restarted = true;
                     } else {
                         reason = PathReason::WarmKept {
                             eta,
@@ -886,7 +888,12 @@ impl Tracker {
             motion,
             latency_ms: start.elapsed().as_secs_f64() * 1e3,
             rebuild_wait_ms: rebuild_wait.as_secs_f64() * 1e3,
-            model: self.fused.as_ref().map(|f| f.model.points_in(&f.pose)),
+            // The fused points the membrane started from, unless a cold
+            // redo restarted the model since.
+            model: match (fused_all, &self.fused) {
+                (Some(all), Some(_)) if !model_restarted => Some(all.points),
+                (_, f) => f.as_ref().map(|f| f.model.points_in(&f.pose)),
+            },
             model_bytes: self.fused.as_ref().map(|f| f.model.bytes()),
         })
     }
