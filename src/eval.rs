@@ -321,9 +321,11 @@ pub fn cold_references(
         deadline: None,
         min_iterations: 0,
     };
+    // As the pipeline takes its frames: without their flying pixels.
+    let (cloud, _) = crate::pipeline::without_flying(cloud, pipeline.flying.as_ref());
     (0..repeats as u64)
         .map(|k| {
-            let thinned = crate::pipeline::thinned_subset(cloud, pipeline, k);
+            let thinned = crate::pipeline::thinned_subset(&cloud, pipeline, k);
             let mut rec = membrane.reconstruct(&thinned, &budget, &crate::membrane::Start::Cold)?;
             // As the pipeline publishes its frames (`membrane.step.unbias`,
             // `pipeline.snap`).

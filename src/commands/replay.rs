@@ -310,8 +310,9 @@ pub fn run_opts(
     let mut warm_own = Vec::new();
     let mut waits = Vec::new();
     let (mut bad_samples, mut failed) = (0usize, 0usize);
-    // Points dropped as detached from their object's body, and in how many frames.
-    let (mut detached, mut detached_frames) = (0usize, 0usize);
+    // Points dropped before tracking: detached from their object's main
+    // body, and flying pixels.
+    let (mut detached, mut flying) = (Dropped::default(), Dropped::default());
     for m in &messages {
         bar.inc(1);
         let now = i64::try_from(m.log_time).unwrap_or(i64::MAX);
@@ -329,9 +330,8 @@ pub fn run_opts(
             match &pr.outcome {
                 Ok(r) => {
                     latencies.push(r.latency_ms);
-                    let dropped = r.reconstruction.report.points_detached;
-                    detached += dropped;
-                    detached_frames += usize::from(dropped > 0);
+                    detached.add(r.reconstruction.report.points_detached);
+                    flying.add(r.points_flying);
                     match r.path {
                         StartPath::Warm => {
                             warm_it.push(r.iterations as f64);
@@ -514,11 +514,14 @@ pub fn run_opts(
             "no deadline (deterministic; --realtime applies pipeline.deadline_ms)".to_string()
         },
     );
-    if detached > 0 {
-        println!(
-            "detached: {detached} points dropped in {detached_frames} frames, away from their object's main body (membrane.prepare.detached)"
-        );
-    }
+    detached.say(
+        "detached",
+        "away from their object's main body (membrane.prepare.detached)",
+    );
+    flying.say(
+        "flying",
+        "behind their object's depth edges (pipeline.flying)",
+    );
     for (id, st) in &per_stream {
         if let (Some(b), Some(m)) = (st.model_bytes_max, &p.model) {
             println!(
@@ -739,7 +742,7 @@ fn rebuild_waits(own: &[f64], waits: &[f64]) -> String {
         return "no frame waited for a rebuild".to_string();
     }
     format!(
-        "{} took a rebuild, waiting {:.1} ms in all; without the waits: {}",
+        "{} waited for a rebuild (adopted or refused), {:.1} ms in all; without the waits: {}",
         waits.len(),
         waits.iter().sum::<f64>(),
         latency_summary(own)
@@ -782,4 +785,28 @@ fn min(v: &[f64]) -> f64 {
 
 fn max(v: &[f64]) -> f64 {
     v.iter().copied().fold(f64::NAN, f64::max)
+}
+
+/// Points a filter dropped over a replay, and in how many frames.
+#[derive(Debug, Default)]
+struct Dropped {
+    points: usize,
+    frames: usize,
+}
+
+impl Dropped {
+    fn add(&mut self, points: usize) {
+        self.points += points;
+        self.frames += usize::from(points > 0);
+    }
+
+    /// The summary line `what: N points dropped in M frames, why`, when any were.
+    fn say(&self, what: &str, why: &str) {
+        if self.points > 0 {
+            println!(
+                "{what}: {} points dropped in {} frames, {why}",
+                self.points, self.frames
+            );
+        }
+    }
 }

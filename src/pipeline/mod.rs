@@ -2,8 +2,9 @@
 //! warm-started frame to frame under a per-frame budget.
 //!
 //! For every frame of a stream the [`Tracker`]:
-//! 1. validates the decoded cloud (too few points → skipped, counted) and
-//!    thins it to about `max_points` points when it has more ([`thinned`]);
+//! 1. validates the decoded cloud (too few points → skipped, counted),
+//!    drops its flying pixels ([`flying`]) and thins it to about
+//!    `max_points` points when it has more ([`thinned`]);
 //! 2. decides the start path: **warm** from the previous frame's surface when
 //!    there is one and the object did not jump or change size beyond the
 //!    configured bounds, **cold** (the paper's six-extreme-point octagon,
@@ -143,6 +144,9 @@ pub struct PipelineConfig {
     /// The per-object model fused over frames ([`crate::model`]): `None`
     /// (null) keeps each frame on its own view.
     pub model: Option<crate::model::ModelConfig>,
+    /// The flying pixels on an object's depth edges, dropped before
+    /// anything else looks at its points ([`flying`]); `None` keeps them.
+    pub flying: Option<flying::FlyingConfig>,
 }
 
 impl Default for PipelineConfig {
@@ -180,6 +184,7 @@ impl Default for PipelineConfig {
             score_visible_radius: 0.02,
             objects: objects::ObjectsConfig::default(),
             model: Some(crate::model::ModelConfig::default()),
+            flying: Some(flying::FlyingConfig::default()),
         }
     }
 }
@@ -300,6 +305,9 @@ checked_f64!(
     |v| v > 0.0 && v.is_finite(),
     "a positive, finite factor"
 );
+
+// After the checked numbers, which it uses.
+pub mod flying;
 
 /// Errors of one frame of one stream.
 #[derive(Debug, Error)]
@@ -444,6 +452,8 @@ pub struct FrameResult {
     /// to the previous surface (warm frames) or to the fused model (a
     /// refit); `None` when the frame restarted the stream.
     pub motion: Option<align::Rigid>,
+    /// Points of the frame dropped as flying pixels ([`flying`]).
+    pub points_flying: usize,
     /// Wall-clock time of the frame in ms, `rebuild_wait_ms` included.
     pub latency_ms: f64,
     /// Of `latency_ms`, the time the frame waited for its stream's
@@ -692,6 +702,8 @@ impl Tracker {
                 min: cfg.min_points.max(4),
             });
         }
+        let (cloud, flying) = without_flying(cloud, cfg.flying.as_ref());
+        let cloud = &*cloud;
         let thin = thinned(cloud, cfg);
         let detached = membranes.cold.config().prepare.detached.as_ref();
         let (raw, thin, detached) = without_detached(cloud, thin, detached, cfg);
@@ -886,6 +898,7 @@ impl Tracker {
             iterations,
             reconstruction: rec,
             motion,
+            points_flying: flying,
             latency_ms: start.elapsed().as_secs_f64() * 1e3,
             rebuild_wait_ms: rebuild_wait.as_secs_f64() * 1e3,
             // The fused points the membrane started from, unless a cold
@@ -1305,6 +1318,20 @@ pub fn thinned_subset<'a>(
     subset: u64,
 ) -> Cow<'a, PointCloud> {
     cloud.thinned(cfg.max_points, subset)
+}
+
+/// `raw` without its flying pixels ([`flying`], with `pipeline.flying`),
+/// and how many went: the cloud a frame starts from.
+pub fn without_flying<'a>(
+    raw: &'a PointCloud,
+    cfg: Option<&flying::FlyingConfig>,
+) -> (Cow<'a, PointCloud>, usize) {
+    let Some(mask) = cfg.and_then(|c| flying::flying(&raw.points, c)) else {
+        return (Cow::Borrowed(raw), 0);
+    };
+    let mut kept = raw.clone();
+    kept.retain_indices(|i| !mask[i]);
+    (Cow::Owned(kept), mask.iter().filter(|&&m| m).count())
 }
 
 /// `raw` without the groups of points detached from the object's main
