@@ -39,6 +39,20 @@ fn synth(dir: &std::path::Path, name: &str, args: &[&str]) -> String {
     bag
 }
 
+/// `sepmem replay -q` of `bag` on single views (`pipeline.model` null),
+/// without the flying-pixel filter (`pipeline.flying` null).
+fn single_view_replay(bag: &str) -> String {
+    sepmem(&[
+        "replay",
+        bag,
+        "-q",
+        "--set",
+        "pipeline.model=null",
+        "--set",
+        "pipeline.flying=null",
+    ])
+}
+
 #[test]
 fn a_smooth_object_whose_track_drifts_is_restarted_and_keeps_its_seen_side() {
     let tmp = tempfile::tempdir().unwrap();
@@ -51,15 +65,7 @@ fn a_smooth_object_whose_track_drifts_is_restarted_and_keeps_its_seen_side() {
         // falls to 0.395 against a first third of 0.458 (seen side median
         // 0.68): the track drifts without the restart this test is about;
         // the orbit scores as without.
-        let out = sepmem(&[
-            "replay",
-            &bag,
-            "-q",
-            "--set",
-            "pipeline.model=null",
-            "--set",
-            "pipeline.flying=null",
-        ]);
+        let out = single_view_replay(&bag);
         eprintln!("{motion}: {out}");
         let view = out
             .lines()
@@ -96,15 +102,7 @@ fn a_box_turning_edge_on_stays_tracked() {
         // (`pipeline.flying` null). With it (14 points a frame dropped),
         // both seeds restart once more (28 warm, 2 cold), last-third IoU
         // 0.756 and 0.761 (seen side 0.937, 0.939 against 0.893, 0.883).
-        let out = sepmem(&[
-            "replay",
-            &bag,
-            "-q",
-            "--set",
-            "pipeline.model=null",
-            "--set",
-            "pipeline.flying=null",
-        ]);
+        let out = single_view_replay(&bag);
         eprintln!("seed {seed}: {out}");
         assert!(out.contains("30 frames ok (29 warm, 1 cold)"), "{out}");
         let view = out

@@ -489,15 +489,9 @@ mod tests {
     fn a_cloud_seen_through_from_the_origin_is_kept_whole() {
         // A whole sphere: its back lies behind its front on every ray.
         let c = Vec3::new(0.0, 0.0, 0.8);
-        let points: Vec<Vec3> = (0..4000)
-            .map(|k| {
-                let (a, b) = (k as f64 * 0.618_034, k as f64 * 0.414_214);
-                let (th, ph) = (
-                    (a.fract() * 2.0 - 1.0).acos(),
-                    b.fract() * std::f64::consts::TAU,
-                );
-                c + 0.1 * Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos())
-            })
+        let points: Vec<Vec3> = crate::shapes::fibonacci_sphere(4000)
+            .into_iter()
+            .map(|p| c + 0.1 * p)
             .collect();
         assert_eq!(flying(&points, &FlyingConfig::default()), None);
     }

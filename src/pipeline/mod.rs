@@ -1379,16 +1379,7 @@ mod tests {
     fn alignment_uses_the_vertices_on_data_with_outward_normals() {
         let lay = crate::spline::Layout::samples(8, 5, 24, 24).expect("layout");
         let mut fit = crate::spline::FitSystem::new(lay, 1e-2).expect("fit");
-        let pts: Vec<Vec3> = (0..2000)
-            .map(|k| {
-                let (a, b) = (k as f64 * 0.618_034, k as f64 * 0.414_214);
-                let (th, ph) = (
-                    (a.fract() * 2.0 - 1.0).acos(),
-                    b.fract() * std::f64::consts::TAU,
-                );
-                Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos())
-            })
-            .collect();
+        let pts = crate::shapes::fibonacci_sphere(2000);
         let surface =
             membrane::init::octagon(&pts, membrane::config::PoleAxis::Z, 0.0, 1.0, &mut fit)
                 .expect("octagon");

@@ -459,13 +459,9 @@ mod tests {
     }
 
     fn sphere(n: usize, centre: Vec3) -> PointCloud {
-        let pts = (0..n)
-            .map(|i| {
-                let (a, b) = (i as f64 * 0.618_034, i as f64 * 0.414_214);
-                let th = (a.fract() * 2.0 - 1.0).acos();
-                let ph = b.fract() * std::f64::consts::TAU;
-                centre + Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()) * 0.1
-            })
+        let pts = crate::shapes::fibonacci_sphere(n)
+            .into_iter()
+            .map(|p| centre + p * 0.1)
             .collect();
         PointCloud::from_points(pts)
     }
