@@ -56,6 +56,7 @@
 use crate::cloud::Vec3;
 use crate::gnomonic::ViewFrame;
 use serde::{Deserialize, Serialize};
+use std::ops::Range;
 
 checked_f64!(
     /// An angle in degrees in (0, 45], checked when the configuration is parsed.
@@ -110,6 +111,13 @@ const NEIGHBOUR_PITCHES: f64 = 1.5;
 /// each; six of it is 5.7 σ, or 4 σ of their difference.
 const NOISE_STEPS: f64 = 6.0;
 
+/// A point whose 3×3 bins hold more points than this is not looked at
+/// closely: on a pixel grid they hold about 20 (bins of 1.5 pitches), or
+/// a few hundred for the pitch's coarser bins of a thin object; a cloud
+/// piled on a few rays (a hostile one) would otherwise cost each of its
+/// points a scan of all of them.
+const MAX_AROUND: usize = 1024;
+
 /// Points sampled for the pitch (every k-th point of a larger cloud).
 const PITCH_SAMPLES: usize = 2048;
 
@@ -134,7 +142,8 @@ pub fn flying(points: &[Vec3], cfg: &FlyingConfig) -> Option<Vec<bool>> {
         // nearest range around: most points need no closer look.
         let least = jump.least((1.0 - GRID_TOLERANCE) * pitch, at.along);
         let beside = image.nearest_around(&nearest, at.uv);
-        if at.range - beside > least && image.is_flying(k, &jump) {
+        let closer = at.range - beside > least && image.crowd(at.uv) <= MAX_AROUND;
+        if closer && image.is_flying(k, &jump) {
             mask[at.index] = true;
             count += 1;
         }
@@ -284,15 +293,28 @@ impl Image {
         [at(0), at(1)]
     }
 
+    /// The bins about the bin of `uv`, 3×3 but clamped to the image: one
+    /// range of bin indices per row.
+    fn block(&self, uv: [f64; 2]) -> impl Iterator<Item = Range<usize>> + '_ {
+        let [x, y] = self.cell(uv);
+        let (x0, x1) = (x.saturating_sub(1), (x + 1).min(self.dims[0] - 1));
+        (y.saturating_sub(1)..=(y + 1).min(self.dims[1] - 1)).map(move |yy| {
+            let row = yy * self.dims[0];
+            row + x0..row + x1 + 1
+        })
+    }
+
     /// The points in the 3×3 bins about the bin of `uv`.
     fn around(&self, uv: [f64; 2]) -> impl Iterator<Item = &Seen> + '_ {
-        let [x, y] = self.cell(uv);
-        let xs = x.saturating_sub(1)..=(x + 1).min(self.dims[0] - 1);
-        (y.saturating_sub(1)..=(y + 1).min(self.dims[1] - 1)).flat_map(move |yy| {
-            let row = yy * self.dims[0];
-            let (a, b) = (self.start[row + xs.start()], self.start[row + xs.end() + 1]);
-            self.at[a..b].iter()
-        })
+        self.block(uv)
+            .flat_map(|bins| self.at[self.start[bins.start]..self.start[bins.end]].iter())
+    }
+
+    /// How many points the 3×3 bins about the bin of `uv` hold.
+    fn crowd(&self, uv: [f64; 2]) -> usize {
+        self.block(uv)
+            .map(|bins| self.start[bins.end] - self.start[bins.start])
+            .sum()
     }
 
     /// The nearest range in each bin (infinite in an empty one).
@@ -308,13 +330,8 @@ impl Image {
     /// The nearest range of `nearest` (per bin) over the 3×3 bins about
     /// the bin of `uv`.
     fn nearest_around(&self, nearest: &[f64], uv: [f64; 2]) -> f64 {
-        let [x, y] = self.cell(uv);
-        let xs = x.saturating_sub(1)..=(x + 1).min(self.dims[0] - 1);
-        (y.saturating_sub(1)..=(y + 1).min(self.dims[1] - 1))
-            .map(|yy| {
-                let row = &nearest[yy * self.dims[0]..][xs.clone()];
-                row.iter().copied().fold(f64::INFINITY, f64::min)
-            })
+        self.block(uv)
+            .flat_map(|bins| nearest[bins].iter().copied())
             .fold(f64::INFINITY, f64::min)
     }
 
@@ -328,6 +345,7 @@ impl Image {
         let sampled = self.at.len().div_ceil(every);
         let mut nearest: Vec<f64> = (0..self.at.len())
             .step_by(every)
+            .filter(|&k| self.crowd(self.at[k].uv) <= MAX_AROUND)
             .filter_map(|k| {
                 let me = &self.at[k];
                 self.around(me.uv)
@@ -492,6 +510,48 @@ mod tests {
         let points: Vec<Vec3> = crate::shapes::fibonacci_sphere(4000)
             .into_iter()
             .map(|p| c + 0.1 * p)
+            .collect();
+        assert_eq!(flying(&points, &FlyingConfig::default()), None);
+    }
+
+    #[test]
+    fn a_points_neighbourhood_is_every_point_of_the_3x3_bins_about_it() {
+        let points: Vec<Vec3> = crate::shapes::fibonacci_sphere(3000)
+            .into_iter()
+            .map(|p| p * 0.2 + Vec3::new(0.1, 0.0, 1.0))
+            .collect();
+        let view = View::of(&points).unwrap();
+        let image = Image::new(&view, view.fill_bin()).unwrap();
+        for me in image.at.iter().step_by(37) {
+            let [x, y] = image.cell(me.uv);
+            let near = |o: &Seen| {
+                let [ox, oy] = image.cell(o.uv);
+                ox.abs_diff(x) <= 1 && oy.abs_diff(y) <= 1
+            };
+            let mut brute: Vec<usize> = image
+                .at
+                .iter()
+                .filter(|o| near(o))
+                .map(|o| o.index)
+                .collect();
+            let mut around: Vec<usize> = image.around(me.uv).map(|o| o.index).collect();
+            brute.sort_unstable();
+            around.sort_unstable();
+            assert_eq!(around, brute);
+            assert_eq!(image.crowd(me.uv), brute.len());
+        }
+    }
+
+    #[test]
+    fn a_cloud_piled_on_two_rays_is_kept_without_a_scan_of_every_pair() {
+        // 100 000 points on two rays: without the bound on a neighbourhood's
+        // crowd, each of 2 048 sampled points scanned 50 000 others.
+        let points: Vec<Vec3> = (0..100_000)
+            .map(|k| {
+                let r = 0.5 + (k % 997) as f64 / 997.0;
+                let d = if k % 2 == 0 { [0.01, 0.0] } else { [0.0, 0.01] };
+                Vec3::new(d[0], d[1], 1.0) * r
+            })
             .collect();
         assert_eq!(flying(&points, &FlyingConfig::default()), None);
     }
