@@ -99,6 +99,17 @@ pub enum CloudError {
         /// Points required.
         need: usize,
     },
+    /// The cloud is too large or too small to be an object a camera sees
+    /// ([`EXTENT_RANGE`]).
+    #[error(
+        "point cloud is {longest:.3e} m across, outside the supported {:e}..{:e} m (coordinates are metres)",
+        EXTENT_RANGE.start(),
+        EXTENT_RANGE.end()
+    )]
+    OutOfRange {
+        /// The longest edge of its bounding box.
+        longest: f64,
+    },
     /// All points lie on (nearly) a plane, a line or a single point.
     #[error("point cloud is degenerate: its extent is {extent:?}")]
     Degenerate {
@@ -151,6 +162,33 @@ pub fn principal_spread(points: &[Vec3]) -> [f64; 3] {
         .map(|l| l.max(0.0).sqrt());
     s.as_mut_slice().sort_by(|a, b| b.total_cmp(a));
     [s[0], s[1], s[2]]
+}
+
+/// The longest bounding-box edge a cloud may have, in metres: from a
+/// nanometre to a million kilometres. Beyond it the membrane's volumes
+/// (Eq. 4's `Vol(r)/δ³`) and spreads leave the range of f64: a sphere of
+/// radius 1e150 gave η 0 everywhere and an empty "converged" surface, and
+/// one of 1e200 or 1e-200 read as flat (its covariance overflowed or
+/// underflowed).
+pub const EXTENT_RANGE: std::ops::RangeInclusive<f64> = 1e-9..=1e9;
+
+/// Check a bounding box's edge lengths `e`.
+///
+/// # Errors
+/// [`CloudError::OutOfRange`] when the longest edge lies outside
+/// [`EXTENT_RANGE`], [`CloudError::Degenerate`] when it is not positive or
+/// the shortest is below 1e-6 of it.
+pub fn check_extent(e: &Vec3) -> Result<(), CloudError> {
+    let longest = e.max();
+    if longest > 0.0 && !EXTENT_RANGE.contains(&longest) {
+        return Err(CloudError::OutOfRange { longest });
+    }
+    if longest.is_nan() || longest <= 0.0 || e.min() < 1e-6 * longest {
+        return Err(CloudError::Degenerate {
+            extent: [e.x, e.y, e.z],
+        });
+    }
+    Ok(())
 }
 
 /// Check that `points` spread in three dimensions, in any orientation.
@@ -428,7 +466,8 @@ impl PointCloud {
     ///
     /// # Errors
     /// [`CloudError::Empty`], [`CloudError::TooFewPoints`],
-    /// [`CloudError::Degenerate`] (flat bounding box) or [`CloudError::Flat`]
+    /// [`CloudError::OutOfRange`], [`CloudError::Degenerate`] (flat bounding
+    /// box) or [`CloudError::Flat`]
     /// (flat in some other orientation, see [`check_spread`]).
     pub fn validate(&self, min_points: usize) -> Result<Aabb, CloudError> {
         if self.points.is_empty() {
@@ -450,13 +489,7 @@ impl PointCloud {
             }
         }
         let bb = self.aabb();
-        let e = bb.extent();
-        let longest = e.max();
-        if longest.is_nan() || longest <= 0.0 || e.min() < 1e-6 * longest {
-            return Err(CloudError::Degenerate {
-                extent: [e.x, e.y, e.z],
-            });
-        }
+        check_extent(&bb.extent())?;
         check_spread(&self.points)?;
         Ok(bb)
     }

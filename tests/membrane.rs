@@ -325,6 +325,35 @@ fn far_stray_points_do_not_make_an_object_read_as_flat() {
     assert!(f >= 0.95, "sphere with far stray points, detached: F = {f}");
 }
 
+/// The membrane's mesh does not depend on the unit of its cloud within
+/// [`sepmem::cloud::EXTENT_RANGE`] (a micrometre-sized and a 1 000 km
+/// sphere score as the unit one), and a cloud beyond that range gets a
+/// typed error that says so. Before the range check, a sphere of radius
+/// 1e150 "converged" to η 0 everywhere, and those of 1e200 and 1e-200
+/// were refused as lying on a plane (their covariance overflowed).
+#[test]
+fn a_clouds_unit_does_not_change_its_mesh_and_beyond_the_range_it_is_refused() {
+    let a = Vec3::repeat(0.5);
+    let pts = ellipsoid(2_000, a, Vec3::zeros(), 5);
+    let truth = ellipsoid(50_000, a, Vec3::zeros(), 97);
+    for scale in [1e-6, 1.0, 1e6] {
+        let cloud = PointCloud::from_points(pts.iter().map(|p| p * scale).collect());
+        let rec = reconstruct(&cloud, &serial(), &Budget::unlimited(), None).unwrap();
+        check_mesh(&rec.mesh);
+        let scaled: Vec<Vec3> = truth.iter().map(|p| p * scale).collect();
+        let f = fscore(&sample_mesh(&rec.mesh, 50_000, 7), &scaled, 0.01 * scale);
+        assert!(f >= 0.95, "sphere at scale {scale}: F = {f}");
+    }
+    for scale in [1e-200, 1e-12, 1e12, 1e150, 1e200] {
+        let cloud = PointCloud::from_points(pts.iter().map(|p| p * scale).collect());
+        let err = reconstruct(&cloud, &serial(), &Budget::unlimited(), None).unwrap_err();
+        assert!(
+            err.to_string().contains("outside the supported"),
+            "scale {scale}: {err}"
+        );
+    }
+}
+
 /// A dense group of points far off the object (a mask that bled onto the
 /// wall behind it: 600 points on a patch 2.4 diameters away) is no
 /// outlier, point by point, but it is detached from the object's body, and

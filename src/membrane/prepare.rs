@@ -253,15 +253,12 @@ pub(crate) fn prepare<'a>(
     // After the outlier filter: a few points far off an object (a flying
     // pixel, a stray return) would otherwise dwarf its spread and make it
     // read as flat.
-    crate::cloud::check_spread(&points)?;
+    // The extent first: a spread's covariance overflows where the extent
+    // is out of range.
     let e = Aabb::from_points(&points).extent();
+    crate::cloud::check_extent(&e)?;
+    crate::cloud::check_spread(&points)?;
     let scale = e.max();
-    if scale.is_nan() || scale <= 0.0 || e.min() < 1e-6 * scale {
-        return Err(CloudError::Degenerate {
-            extent: [e.x, e.y, e.z],
-        }
-        .into());
-    }
     let mut d_order = d_kept.clone();
     let median = quantile(&mut d_order, 0.5, scale);
     // Single views: the viewpoint, its z-buffer, the bound on the unseen
