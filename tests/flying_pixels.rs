@@ -8,8 +8,11 @@
 mod common;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use sepmem::cloud::PointCloud;
 use sepmem::cloud::Vec3;
-use sepmem::pipeline::flying::{flying, FlyingConfig};
+use sepmem::config::Config;
+use sepmem::pipeline::flying::{flying, FlyingConfig, Found};
+use sepmem::pipeline::{Membranes, StreamKey, Tracker};
 use sepmem::synth::sequence::{build_streams, Layout, SceneMotion, SequenceSpec};
 use sepmem::synth::{Camera, FlyingPixels, Frame, Noise, Renderer};
 
@@ -40,19 +43,24 @@ fn frames(flying: Option<FlyingPixels>) -> Vec<Frame> {
         .collect()
 }
 
+/// The points of `frame`'s cloud seen through `pose`.
+fn seen_through(frame: &Frame, pose: &Isometry3<f64>) -> Vec<Vec3> {
+    let points = frame.cloud.points.iter();
+    points
+        .map(|p| pose.transform_point(&(*p).into()).coords)
+        .collect()
+}
+
 /// (flying pixels caught, flying pixels, surface points taken for flying,
-/// surface points) over `frames`, each frame's cloud seen through `pose`.
-fn tally(frames: &[Frame], pose: &Isometry3<f64>) -> [usize; 4] {
-    let mut t = [0; 4];
+/// surface points, frames found one depth image) over `frames`, each
+/// frame's cloud seen through `pose`.
+fn tally(frames: &[Frame], pose: &Isometry3<f64>) -> [usize; 5] {
+    let mut t = [0; 5];
     for f in frames {
         let surface = f.cloud.len() - f.flying - f.outliers;
-        let points: Vec<Vec3> = f
-            .cloud
-            .points
-            .iter()
-            .map(|p| pose.transform_point(&(*p).into()).coords)
-            .collect();
-        let mask = flying(&points, &FlyingConfig::default()).unwrap_or_default();
+        let found = flying(&seen_through(f, pose), &FlyingConfig::default());
+        t[4] += usize::from(matches!(found, Found::Image(_)));
+        let mask = found.mask().unwrap_or_default();
         let is = |i: usize| mask.get(i).copied().unwrap_or(false);
         t[0] += (surface..surface + f.flying).filter(|&i| is(i)).count();
         t[1] += f.flying;
@@ -69,7 +77,8 @@ fn flying_pixels_are_found_and_the_surface_is_kept() {
     // 3 of 33 091 surface points taken (0.009 %); without flying pixels 5
     // of 33 716.
     let faulty = frames(Some(FlyingPixels::with_probability(0.3)));
-    let [caught, flying_n, wrong, surface] = tally(&faulty, &Isometry3::identity());
+    let [caught, flying_n, wrong, surface, images] = tally(&faulty, &Isometry3::identity());
+    assert_eq!(images, faulty.len());
     eprintln!("caught {caught} of {flying_n} flying; {wrong} of {surface} surface points");
     assert!(flying_n > 500, "{flying_n} flying pixels rendered");
     assert!(
@@ -82,7 +91,8 @@ fn flying_pixels_are_found_and_the_surface_is_kept() {
     );
     // Without flying pixels the filter takes next to nothing.
     let clean = frames(None);
-    let [_, none, wrong, surface] = tally(&clean, &Isometry3::identity());
+    let [_, none, wrong, surface, images] = tally(&clean, &Isometry3::identity());
+    assert_eq!(images, clean.len());
     eprintln!("clean: {wrong} of {surface} surface points taken");
     assert_eq!(none, 0);
     assert!(
@@ -101,18 +111,45 @@ fn a_cloud_seen_from_elsewhere_keeps_every_point() {
     // keeps every point; with 0.8 as the least share on the grid it took
     // 140 of 33 091 surface points.
     let faulty = frames(Some(FlyingPixels::with_probability(0.3)));
-    let aside = Isometry3::from_parts(
-        Translation3::new(0.6, -0.2, 0.3),
-        UnitQuaternion::from_scaled_axis(Vec3::new(0.3, -0.5, 0.2)),
-    );
+    let aside = base_aside();
     let behind = Isometry3::from_parts(
         Translation3::new(0.0, 0.0, 2.0),
         UnitQuaternion::from_scaled_axis(Vec3::new(0.0, std::f64::consts::PI, 0.0)),
     );
     for pose in [aside, behind] {
-        let [caught, _, wrong, surface] = tally(&faulty, &pose);
+        let [caught, _, wrong, surface, images] = tally(&faulty, &pose);
         eprintln!("{caught} flying caught; {wrong} of {surface} surface points taken");
-        assert_eq!((caught, wrong), (0, 0));
+        assert_eq!((caught, wrong, images), (0, 0, 0));
+    }
+}
+
+/// The pose of a robot's base 0.6 m aside from the camera, turned.
+fn base_aside() -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(0.6, -0.2, 0.3),
+        UnitQuaternion::from_scaled_axis(Vec3::new(0.3, -0.5, 0.2)),
+    )
+}
+
+#[test]
+fn a_tracker_counts_the_frames_that_are_not_a_depth_image_from_their_origin() {
+    // The turning capsule's frames 0, 10 and 20 in the camera's optical
+    // frame, and the same frames in a base frame aside: there the tracker
+    // counts each (and warns once it counted NOT_AN_IMAGE_WARN_AFTER), and
+    // its results say the filter kept every point.
+    let faulty = frames(Some(FlyingPixels::with_probability(0.3)));
+    let cfg = Config::load(None, &[]).unwrap();
+    let membranes = Membranes::new(&cfg.membrane, &cfg.pipeline).unwrap();
+    for (pose, images) in [(Isometry3::identity(), true), (base_aside(), false)] {
+        let mut tracker = Tracker::new(StreamKey::topic("/capsule"));
+        for f in &faulty[..3] {
+            let cloud = PointCloud::from_points(seen_through(f, &pose));
+            let r = tracker.process(&cloud, &membranes, &cfg.pipeline).unwrap();
+            assert_eq!(r.flying.not_an_image, !images);
+            assert_eq!(r.flying.dropped > 0, images, "{:?}", r.flying);
+        }
+        let counted = tracker.stats().not_an_image;
+        assert_eq!(counted, if images { 0 } else { 3 });
     }
 }
 

@@ -313,6 +313,8 @@ pub fn run_opts(
     // Points dropped before tracking: detached from their object's main
     // body, and flying pixels.
     let (mut detached, mut flying) = (Dropped::default(), Dropped::default());
+    // Frames the flying-pixel filter found not one depth image.
+    let mut not_an_image = 0usize;
     for m in &messages {
         bar.inc(1);
         let now = i64::try_from(m.log_time).unwrap_or(i64::MAX);
@@ -331,7 +333,8 @@ pub fn run_opts(
                 Ok(r) => {
                     latencies.push(r.latency_ms);
                     detached.add(r.reconstruction.report.points_detached);
-                    flying.add(r.points_flying);
+                    flying.add(r.flying.dropped);
+                    not_an_image += usize::from(r.flying.not_an_image);
                     match r.path {
                         StartPath::Warm => {
                             warm_it.push(r.iterations as f64);
@@ -522,6 +525,11 @@ pub fn run_opts(
         "flying",
         "behind their object's depth edges (pipeline.flying)",
     );
+    if not_an_image > 0 {
+        println!(
+            "not a depth image: {not_an_image} frames were not one depth image seen from their frame's origin; the flying-pixel filter kept their points (publish the segmented cloud in the camera's optical frame)"
+        );
+    }
     for (id, st) in &per_stream {
         if let (Some(b), Some(m)) = (st.model_bytes_max, &p.model) {
             println!(

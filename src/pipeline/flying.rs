@@ -52,6 +52,16 @@
 //! eye. A cloud in a frame other than the sensor's, merged from several
 //! views, or thinned on a voxel grid before it came keeps every point: it
 //! would show a jump wherever its far side lies behind its near side.
+//! Such a frame is counted ([`Outcome::not_an_image`], `StreamStats`), the
+//! tracker warns once a stream has sent [`super::NOT_AN_IMAGE_WARN_AFTER`]
+//! of them, and `replay` says how many there were: the fused model takes
+//! the same origin for the camera, so such a stream needs its clouds in
+//! the camera's optical frame.
+//!
+//! A point whose 3×3 bins hold more than [`MAX_AROUND`] points is not
+//! looked at closely: a cloud piled on a few rays (100 000 points on three
+//! rays) cost each sampled point a scan of all the points on its ray,
+//! 0.2–0.3 s a frame, and 40–85 ms without them (two busy cores beside).
 
 use crate::cloud::Vec3;
 use crate::gnomonic::ViewFrame;
@@ -121,13 +131,56 @@ const MAX_AROUND: usize = 1024;
 /// Points sampled for the pitch (every k-th point of a larger cloud).
 const PITCH_SAMPLES: usize = 2048;
 
-/// Which of `points` are flying pixels seen from the origin (module docs):
-/// `None` when none is, or when the cloud is not one view from the origin.
+/// What [`flying`] found a cloud to be.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Found {
+    /// Fewer finite points than the filter looks at, or no extent.
+    TooFew,
+    /// Not one depth image seen from the origin (a point outside the
+    /// view's cone, or the points not on one pixel grid): every point is
+    /// kept. A cloud in a frame other than the camera's looks so.
+    NotAnImage,
+    /// One depth image seen from the origin, and which of its points are
+    /// flying pixels (`None` when none is).
+    Image(Option<Vec<bool>>),
+}
+
+impl Found {
+    /// Which points are flying pixels; `None` when none is.
+    pub fn mask(self) -> Option<Vec<bool>> {
+        match self {
+            Self::Image(mask) => mask,
+            Self::TooFew | Self::NotAnImage => None,
+        }
+    }
+}
+
+/// What the filter did to one frame's cloud.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Outcome {
+    /// Points dropped as flying pixels.
+    pub dropped: usize,
+    /// The cloud was not one depth image seen from its frame's origin
+    /// ([`Found::NotAnImage`]), so every point was kept.
+    pub not_an_image: bool,
+}
+
+/// Which of `points` are flying pixels seen from the origin (module docs).
 /// Non-finite points are never flying.
-pub fn flying(points: &[Vec3], cfg: &FlyingConfig) -> Option<Vec<bool>> {
-    let view = View::of(points)?;
-    let pitch = Image::new(&view, view.fill_bin())?.pitch()?;
-    let image = Image::new(&view, NEIGHBOUR_PITCHES * pitch)?;
+pub fn flying(points: &[Vec3], cfg: &FlyingConfig) -> Found {
+    let view = match View::of(points) {
+        Ok(view) => view,
+        Err(found) => return found,
+    };
+    let Some(coarse) = Image::new(&view, view.fill_bin()) else {
+        return Found::TooFew;
+    };
+    let Some(pitch) = coarse.pitch() else {
+        return Found::NotAnImage;
+    };
+    let Some(image) = Image::new(&view, NEIGHBOUR_PITCHES * pitch) else {
+        return Found::TooFew;
+    };
     let tan = cfg.min_angle_deg.get().to_radians().tan();
     let jump = Jump {
         pitch,
@@ -148,7 +201,7 @@ pub fn flying(points: &[Vec3], cfg: &FlyingConfig) -> Option<Vec<bool>> {
             count += 1;
         }
     }
-    (count > 0).then_some(mask)
+    Found::Image((count > 0).then_some(mask))
 }
 
 /// When a step between two neighbours on the pixel grid is a jump.
@@ -189,25 +242,27 @@ struct View {
 }
 
 impl View {
-    /// `None` for too few finite points, one outside the view's cone, or
-    /// no extent.
-    fn of(points: &[Vec3]) -> Option<Self> {
+    /// [`Found::TooFew`] for too few finite points or no extent,
+    /// [`Found::NotAnImage`] for a point outside the view's cone (or a
+    /// centroid at the eye).
+    fn of(points: &[Vec3]) -> Result<Self, Found> {
         let finite = || points.iter().filter(|p| p.iter().all(|c| c.is_finite()));
         let (n, sum) = finite().fold((0, Vec3::zeros()), |(n, s), p| (n + 1, s + p));
         if n < MIN_POINTS {
-            return None;
+            return Err(Found::TooFew);
         }
-        let frame = ViewFrame::looking_at(Vec3::zeros(), sum / n as f64)?;
+        let frame =
+            ViewFrame::looking_at(Vec3::zeros(), sum / n as f64).ok_or(Found::NotAnImage)?;
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         let mut seen = Vec::with_capacity(n);
         for (index, p) in points.iter().enumerate() {
             if !p.iter().all(|c| c.is_finite()) {
                 continue;
             }
-            let (uv, along) = frame.project(p)?;
+            let (uv, along) = frame.project(p).ok_or(Found::NotAnImage)?;
             let range = p.norm();
             if along < VIEW_MIN_COS * range {
-                return None;
+                return Err(Found::NotAnImage);
             }
             for k in 0..2 {
                 lo[k] = lo[k].min(uv[k]);
@@ -220,7 +275,11 @@ impl View {
                 index,
             });
         }
-        (hi[0] > lo[0] || hi[1] > lo[1]).then_some(Self { seen, lo, hi })
+        if hi[0] > lo[0] || hi[1] > lo[1] {
+            Ok(Self { seen, lo, hi })
+        } else {
+            Err(Found::TooFew)
+        }
     }
 
     /// 1.5 times the pitch the window would have if the points filled it:
@@ -479,7 +538,9 @@ mod tests {
         }
         let n_fly = flies.iter().filter(|&&f| f).count();
         assert!(n_fly > 20, "{n_fly} flying pixels");
-        let mask = flying(&points, &FlyingConfig::default()).expect("flying pixels found");
+        let mask = flying(&points, &FlyingConfig::default())
+            .mask()
+            .expect("flying pixels found");
         let caught = mask.iter().zip(&flies).filter(|(m, f)| **m && **f).count();
         let wrong = mask.iter().zip(&flies).filter(|(m, f)| **m && !**f).count();
         assert!(caught as f64 >= 0.95 * n_fly as f64, "{caught} of {n_fly}");
@@ -500,7 +561,10 @@ mod tests {
                 points.push(d * z);
             }
         }
-        assert_eq!(flying(&points, &FlyingConfig::default()), None);
+        assert_eq!(
+            flying(&points, &FlyingConfig::default()),
+            Found::Image(None)
+        );
     }
 
     #[test]
@@ -511,7 +575,8 @@ mod tests {
             .into_iter()
             .map(|p| c + 0.1 * p)
             .collect();
-        assert_eq!(flying(&points, &FlyingConfig::default()), None);
+        let found = flying(&points, &FlyingConfig::default());
+        assert_eq!(found, Found::NotAnImage);
     }
 
     #[test]
@@ -553,26 +618,27 @@ mod tests {
                 Vec3::new(d[0], d[1], 1.0) * r
             })
             .collect();
-        assert_eq!(flying(&points, &FlyingConfig::default()), None);
+        let found = flying(&points, &FlyingConfig::default());
+        assert_eq!(found, Found::NotAnImage);
     }
 
     #[test]
     fn odd_clouds_keep_every_point() {
         let cfg = FlyingConfig::default();
-        assert_eq!(flying(&[], &cfg), None);
+        assert_eq!(flying(&[], &cfg), Found::TooFew);
         let nan = vec![Vec3::new(f64::NAN, 0.0, 1.0); 100];
-        assert_eq!(flying(&nan, &cfg), None);
+        assert_eq!(flying(&nan, &cfg), Found::TooFew);
         let same = vec![Vec3::new(0.1, 0.0, 1.0); 100];
-        assert_eq!(flying(&same, &cfg), None);
+        assert_eq!(flying(&same, &cfg), Found::TooFew);
         // Around the eye: points behind it.
         let around: Vec<Vec3> = (0..100)
             .map(|k| Vec3::new((k as f64).cos(), (k as f64).sin(), 0.1))
             .collect();
-        assert_eq!(flying(&around, &cfg), None);
+        assert_eq!(flying(&around, &cfg), Found::NotAnImage);
         // On one line of pixels.
         let line: Vec<Vec3> = (0..100)
             .map(|k| Vec3::new(k as f64 / 525.0, 0.0, 1.0 + 0.01 * (k % 2) as f64))
             .collect();
-        assert!(flying(&line, &cfg).is_none_or(|m| m.len() == 100));
+        assert!(flying(&line, &cfg).mask().is_none_or(|m| m.len() == 100));
     }
 }

@@ -452,8 +452,10 @@ pub struct FrameResult {
     /// to the previous surface (warm frames) or to the fused model (a
     /// refit); `None` when the frame restarted the stream.
     pub motion: Option<align::Rigid>,
-    /// Points of the frame dropped as flying pixels ([`flying`]).
-    pub points_flying: usize,
+    /// The flying-pixel filter's outcome ([`flying`]): the points it
+    /// dropped, or that the cloud was not one depth image seen from its
+    /// frame's origin.
+    pub flying: flying::Outcome,
     /// Wall-clock time of the frame in ms, `rebuild_wait_ms` included.
     pub latency_ms: f64,
     /// Of `latency_ms`, the time the frame waited for its stream's
@@ -481,7 +483,16 @@ pub struct StreamStats {
     pub fallbacks: u64,
     /// Frames skipped or failed.
     pub errors: u64,
+    /// Frames whose cloud was not one depth image seen from its frame's
+    /// origin (with `pipeline.flying`: [`flying::Found::NotAnImage`]).
+    pub not_an_image: u64,
 }
+
+/// Frames of a stream that were not one depth image seen from their
+/// frame's origin before the tracker warns, once: the flying-pixel filter
+/// kept their points and the fused model's views assume that origin is the
+/// camera. Publish the segmented cloud in the camera's optical frame.
+pub const NOT_AN_IMAGE_WARN_AFTER: u64 = 3;
 
 #[derive(Debug, Clone)]
 struct Previous {
@@ -597,6 +608,23 @@ impl Tracker {
         }
     }
 
+    /// Count a frame that was not one depth image seen from its frame's
+    /// origin, and warn once at [`NOT_AN_IMAGE_WARN_AFTER`].
+    fn note_not_an_image(&mut self, not_an_image: bool) {
+        if !not_an_image {
+            return;
+        }
+        self.stats.not_an_image += 1;
+        if self.stats.not_an_image == NOT_AN_IMAGE_WARN_AFTER {
+            tracing::warn!(
+                stream = %self.key,
+                "{NOT_AN_IMAGE_WARN_AFTER} clouds were not one depth image seen from their frame's origin: \
+                 the flying-pixel filter keeps their points and the fused model takes that origin for the camera; \
+                 publish the segmented cloud in the camera's optical frame"
+            );
+        }
+    }
+
     /// The stream this tracker follows.
     pub fn key(&self) -> &StreamKey {
         &self.key
@@ -703,6 +731,7 @@ impl Tracker {
             });
         }
         let (cloud, flying) = without_flying(cloud, cfg.flying.as_ref());
+        self.note_not_an_image(flying.not_an_image);
         let cloud = &*cloud;
         let thin = thinned(cloud, cfg);
         let detached = membranes.cold.config().prepare.detached.as_ref();
@@ -898,7 +927,7 @@ impl Tracker {
             iterations,
             reconstruction: rec,
             motion,
-            points_flying: flying,
+            flying,
             latency_ms: start.elapsed().as_secs_f64() * 1e3,
             rebuild_wait_ms: rebuild_wait.as_secs_f64() * 1e3,
             // The fused points the membrane started from, unless a cold
@@ -1321,17 +1350,30 @@ pub fn thinned_subset<'a>(
 }
 
 /// `raw` without its flying pixels ([`flying`], with `pipeline.flying`),
-/// and how many went: the cloud a frame starts from.
+/// and how many went or why none could: the cloud a frame starts from.
 pub fn without_flying<'a>(
     raw: &'a PointCloud,
     cfg: Option<&flying::FlyingConfig>,
-) -> (Cow<'a, PointCloud>, usize) {
-    let Some(mask) = cfg.and_then(|c| flying::flying(&raw.points, c)) else {
-        return (Cow::Borrowed(raw), 0);
+) -> (Cow<'a, PointCloud>, flying::Outcome) {
+    let found = cfg.map(|c| flying::flying(&raw.points, c));
+    let not_an_image = found == Some(flying::Found::NotAnImage);
+    let Some(mask) = found.and_then(flying::Found::mask) else {
+        let outcome = flying::Outcome {
+            dropped: 0,
+            not_an_image,
+        };
+        return (Cow::Borrowed(raw), outcome);
     };
     let mut kept = raw.clone();
     kept.retain_indices(|i| !mask[i]);
-    (Cow::Owned(kept), mask.iter().filter(|&&m| m).count())
+    let dropped = mask.iter().filter(|&&m| m).count();
+    (
+        Cow::Owned(kept),
+        flying::Outcome {
+            dropped,
+            ..Default::default()
+        },
+    )
 }
 
 /// `raw` without the groups of points detached from the object's main

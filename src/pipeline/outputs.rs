@@ -70,7 +70,7 @@ pub fn frame_diagnostics(
             + rep.points_non_finite
             + rep.points_duplicate
             + rep.points_detached
-            + r.points_flying
+            + r.flying.dropped
             + rep.points_outliers) as u32,
         iterations: r.iterations as u32,
         global_separability: rep.eta_final as f32,
