@@ -99,6 +99,26 @@ pub enum CloudError {
         /// Points required.
         need: usize,
     },
+    /// Too few of a cloud's points are left to carry a surface once the
+    /// unusable ones are dropped.
+    #[error(
+        "{usable} of the cloud's {points} points are usable ({non_finite} non-finite, \
+         {duplicate} duplicates, {detached} detached from its main body), at least {need} are needed"
+    )]
+    TooFewUsable {
+        /// Points left.
+        usable: usize,
+        /// Points in the cloud.
+        points: usize,
+        /// Points with a non-finite coordinate.
+        non_finite: usize,
+        /// Points equal to an earlier one.
+        duplicate: usize,
+        /// Points in groups detached from the main body.
+        detached: usize,
+        /// Points required.
+        need: usize,
+    },
     /// The cloud is too large or too small to be an object a camera sees
     /// ([`EXTENT_RANGE`]).
     #[error(

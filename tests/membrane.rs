@@ -354,6 +354,28 @@ fn a_clouds_unit_does_not_change_its_mesh_and_beyond_the_range_it_is_refused() {
     }
 }
 
+/// A cloud with too few usable points says what became of the others:
+/// 10 000 copies of 5 points 1 m apart (and a NaN each) leave 5 points,
+/// which the detached-group filter takes for one body and four strays.
+#[test]
+fn a_cloud_of_too_few_usable_points_says_what_became_of_the_others() {
+    let five: Vec<Vec3> = (0..5).map(|k| Vec3::new(f64::from(k), 0.0, 1.0)).collect();
+    let mut pts: Vec<Vec3> = five.iter().cycle().take(10_000).copied().collect();
+    pts.extend((0..10_000).map(|_| Vec3::new(f64::NAN, 0.0, 0.0)));
+    let cloud = PointCloud::from_points(pts);
+    let err = reconstruct(&cloud, &serial(), &Budget::unlimited(), None).unwrap_err();
+    let said = err.to_string();
+    for part in [
+        "1 of the cloud's 20000 points are usable",
+        "10000 non-finite",
+        "9995 duplicates",
+        "4 detached",
+        "at least 16",
+    ] {
+        assert!(said.contains(part), "{said}");
+    }
+}
+
 /// A dense group of points far off the object (a mask that bled onto the
 /// wall behind it: 600 points on a patch 2.4 diameters away) is no
 /// outlier, point by point, but it is detached from the object's body, and

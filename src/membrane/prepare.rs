@@ -186,9 +186,12 @@ fn usable(cloud: &PointCloud, p: &PrepareConfig) -> Result<Usable, MembraneError
         return Err(CloudError::Empty.into());
     }
     if points.len() < MIN_POINTS {
-        let got = points.len();
-        return Err(CloudError::TooFewPoints {
-            got,
+        return Err(CloudError::TooFewUsable {
+            usable: points.len(),
+            points: cloud.len(),
+            non_finite,
+            duplicate,
+            detached,
             need: MIN_POINTS,
         }
         .into());
