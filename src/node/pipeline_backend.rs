@@ -163,6 +163,13 @@ impl EngineProcessor {
         } else {
             ""
         };
+        // The flying-pixel filter and the fused model take the cloud
+        // frame's origin for the camera (pipeline::flying).
+        let frame_note = if r.flying.not_an_image {
+            "; not one depth image seen from its frame's origin (publish it in the camera's optical frame)"
+        } else {
+            ""
+        };
         out.objects.push(ObjectReport {
             stream: r.stream.to_string(),
             eta_g: rep.eta_final,
@@ -170,7 +177,7 @@ impl EngineProcessor {
             warm,
             level,
             message: format!(
-                "{} start ({}), stop: {}, surface {}{shown_note}",
+                "{} start ({}), stop: {}, surface {}{shown_note}{frame_note}",
                 if warm { "warm" } else { "cold" },
                 r.reason,
                 rep.stop,
@@ -384,4 +391,61 @@ pub fn encode_diagnostic_array(stamp_ns: i64, frame_id: &str, status: &[StatusEn
     };
     // Strings and numbers only: encoding cannot fail for this type.
     wire::encode(&msg).unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cloud::{PointCloud, Vec3};
+    use crate::config::Config;
+    use crate::wire::pointcloud2::encode_pointcloud2;
+
+    /// The front of a sphere of radius 0.1 m at 0.8 m as a 640×480, f = 525
+    /// camera sees it (one point per pixel), moved by `shift`.
+    fn sphere_image(shift: Vec3) -> Vec<Vec3> {
+        let c = Vec3::new(0.0, 0.0, 0.8);
+        let mut out = Vec::new();
+        for v in 120..360 {
+            for u in 200..440 {
+                let d = Vec3::new((u as f64 - 319.5) / 525.0, (v as f64 - 239.5) / 525.0, 1.0)
+                    .normalize();
+                let b = d.dot(&c);
+                let disc = b * b - (c.norm_squared() - 0.01);
+                if disc > 0.0 {
+                    out.push(d * (b - disc.sqrt()) + shift);
+                }
+            }
+        }
+        out
+    }
+
+    /// The `/diagnostics` message of one frame of `points`.
+    fn message(points: Vec<Vec3>) -> String {
+        let cfg = Config::load(None, &[]).unwrap();
+        let backend =
+            PipelineBackend::new(&cfg.membrane, cfg.pipeline.clone(), cfg.wire.clone()).unwrap();
+        let mut processor = backend.processor("/sphere/points");
+        let cloud = PointCloud::from_points(points);
+        let frame = Frame {
+            topic: "/sphere/points".into(),
+            payload: wire::encode(&encode_pointcloud2(&cloud, Header::default())).unwrap(),
+            received_ns: 0,
+            source_ns: None,
+            sequence: None,
+            deadline: Instant::now() + Duration::from_secs(10),
+        };
+        let result = processor.process(&frame, &mut |_| {});
+        assert_eq!(result.error, None);
+        result.objects[0].message.clone()
+    }
+
+    #[test]
+    fn a_cloud_outside_the_cameras_frame_is_named_in_its_status() {
+        let seen = message(sphere_image(Vec3::zeros()));
+        assert!(!seen.contains("not one depth image"), "{seen}");
+        // The same points in a frame 0.5 m aside: not on one pixel grid
+        // seen from that frame's origin.
+        let aside = message(sphere_image(Vec3::new(0.5, 0.0, 0.0)));
+        assert!(aside.contains("not one depth image"), "{aside}");
+    }
 }
