@@ -403,20 +403,8 @@ mod tests {
     /// The front of a sphere of radius 0.1 m at 0.8 m as a 640×480, f = 525
     /// camera sees it (one point per pixel), moved by `shift`.
     fn sphere_image(shift: Vec3) -> Vec<Vec3> {
-        let c = Vec3::new(0.0, 0.0, 0.8);
-        let mut out = Vec::new();
-        for v in 120..360 {
-            for u in 200..440 {
-                let d = Vec3::new((u as f64 - 319.5) / 525.0, (v as f64 - 239.5) / 525.0, 1.0)
-                    .normalize();
-                let b = d.dot(&c);
-                let disc = b * b - (c.norm_squared() - 0.01);
-                if disc > 0.0 {
-                    out.push(d * (b - disc.sqrt()) + shift);
-                }
-            }
-        }
-        out
+        let view = crate::pipeline::flying::tests::sphere_view(Vec3::new(0.0, 0.0, 0.8), 0.1);
+        view.into_iter().map(|(_, _, p)| p + shift).collect()
     }
 
     /// The `/diagnostics` message of one frame of `points`.

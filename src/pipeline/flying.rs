@@ -491,13 +491,13 @@ fn dist2(a: [f64; 2], b: [f64; 2]) -> f64 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// The pixels of a 640×480, f = 525 camera that see the sphere of
     /// radius `r` about `c`, each at its first hit (a depth image), with no
     /// return beyond 80° incidence (as `sepmem synth`'s Kinect model).
-    fn sphere_view(c: Vec3, r: f64) -> Vec<(usize, usize, Vec3)> {
+    pub(crate) fn sphere_view(c: Vec3, r: f64) -> Vec<(usize, usize, Vec3)> {
         let mut out = Vec::new();
         for v in 0..480 {
             for u in 0..640 {
