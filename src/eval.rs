@@ -321,8 +321,8 @@ pub fn cold_references(
         deadline: None,
         min_iterations: 0,
     };
-    // As the pipeline takes its frames: without their flying pixels.
-    let (cloud, _) = crate::pipeline::without_flying(cloud, pipeline.flying.as_ref());
+    // As the pipeline takes its frames: without their flying pixels, capped.
+    let (cloud, _) = crate::pipeline::frame_points(cloud, pipeline);
     (0..repeats as u64)
         .map(|k| {
             let thinned = crate::pipeline::thinned_subset(&cloud, pipeline, k);
