@@ -99,6 +99,9 @@ fn assert_meshed_within_the_cap(name: &str, out: &str) {
     let stated = (60_000.0 * 66.0 + 13.0 * 4.0 * 160.0 * 160.0) / 1024.0;
     assert!((cap - stated).abs() < 0.1, "{name}: cap {cap} KiB: {model}");
     assert!(held > 0.0 && held <= cap, "{name}: {model}");
+    // No view restarted the model: on these clean sequences it would be a
+    // view that sees the model's own surface through (`model::views`).
+    assert!(!model.contains("restarted"), "{name}: {model}");
 }
 
 /// The line of `out` that starts with `prefix`, from its first `mark` on.
@@ -125,6 +128,25 @@ fn every_committed_sequence_is_meshed_within_the_model_cap() {
     for name in ["turn_ycb_banana", "swap"] {
         assert_meshed_within_the_cap(name, &replay(name));
     }
+}
+
+#[test]
+fn replay_names_the_frames_whose_view_restarted_the_model() {
+    // The swap with the track never lost (`icp_min_inliers` null): no cold
+    // start restarts the model, and the mug's view sees through the
+    // bottle's model (the swap at frame 20). The bottle stands inside the
+    // box's volume, so at frame 10 the box's model is not seen through.
+    let out = replay_with("swap", &["-q", "--set", "pipeline.icp_min_inliers=null"]);
+    let model = line(&out, "model ");
+    let frames: Vec<u64> = model
+        .split("swapped): frame ")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no restart in {model}"))
+        .split(", ")
+        .map(|f| f.trim().parse().unwrap())
+        .collect();
+    assert!(frames.iter().any(|f| (20..=22).contains(f)), "{model}");
+    assert!(model.contains("reset_share"), "{model}");
 }
 
 #[test]

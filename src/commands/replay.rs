@@ -190,9 +190,31 @@ struct StreamSummary {
     cold_vs_cold: (usize, usize),
     /// Most bytes the stream's fused model held after a frame.
     model_bytes_max: Option<usize>,
+    /// Frames whose view restarted the fused model.
+    model_resets: Vec<u64>,
 }
 
 const POINTCLOUD2: &str = "sensor_msgs/msg/PointCloud2";
+
+/// The model line's note of the frames whose view restarted the fused
+/// model (empty when none did).
+fn resets_note(frames: &[u64]) -> String {
+    if frames.is_empty() {
+        return String::new();
+    }
+    let mut list: Vec<String> = frames.iter().take(8).map(u64::to_string).collect();
+    if frames.len() > 8 {
+        list.push("…".to_owned());
+    }
+    format!(
+        "; restarted {} by a view that saw through more than pipeline.model.reset_share of it (the object changed, or was swapped): frame {}",
+        match frames.len() {
+            1 => "once".to_owned(),
+            n => format!("{n} times"),
+        },
+        list.join(", ")
+    )
+}
 
 /// Latency percentile (nearest rank) of sorted values.
 pub fn percentile(sorted: &[f64], q: f64) -> f64 {
@@ -372,6 +394,9 @@ pub fn run_opts(
                     );
                     let entry = per_stream.entry(id.clone()).or_default();
                     entry.model_bytes_max = entry.model_bytes_max.max(r.model_bytes);
+                    if r.model_reset {
+                        entry.model_resets.push(r.frame);
+                    }
                     if let Some(sc) = &score {
                         entry.scores.push(*sc);
                         line += &format!(
@@ -533,9 +558,10 @@ pub fn run_opts(
     for (id, st) in &per_stream {
         if let (Some(b), Some(m)) = (st.model_bytes_max, &p.model) {
             println!(
-                "model {id}: at most {:.1} KiB after a frame (cap {:.1} KiB: pipeline.model's max_voxels, max_views, view_side)",
+                "model {id}: at most {:.1} KiB after a frame (cap {:.1} KiB: pipeline.model's max_voxels, max_views, view_side){}",
                 b as f64 / 1024.0,
-                m.max_bytes() as f64 / 1024.0
+                m.max_bytes() as f64 / 1024.0,
+                resets_note(&st.model_resets)
             );
         }
         if !st.scores.is_empty() {

@@ -253,3 +253,38 @@ fn the_voxel_spans_at_least_two_point_spacings_of_the_first_view() {
     model.integrate(&first, &pose(0.0));
     assert!((model.memory.voxel_size() - edge).abs() < 1e-12);
 }
+
+#[test]
+fn a_dense_views_own_surface_is_not_seen_through() {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    // A 0.2 m box seen from 1 m with its points about 1.5 mm apart (a seen
+    // surface of two spacings is 3 mm thick, the voxels 4 mm), a sensor's
+    // noise along the rays (σ 1.5 mm) and a tracked pose 2° off, about
+    // another axis each frame. Measured: 2.3 % of the judged voxels seen
+    // through; judged with the seen surface two spacings thick whatever
+    // the voxel, 7.7 %.
+    let solid = cuboid(Vec3::new(0.1, 0.07, 0.05), 20_000);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let noise = Normal::new(0.0, 0.0015).unwrap();
+    let mut model = ObjectModel::new(ModelConfig::default(), 0.2);
+    let (mut tested, mut contradicted) = (0, 0);
+    for k in 0..20 {
+        let truth = pose(0.1 * f64::from(k));
+        let seen: Vec<Vec3> = view(&solid, &truth)
+            .into_iter()
+            .map(|q| q * (1.0 + noise.sample(&mut rng) / q.norm()))
+            .collect();
+        let axis = [Vector3::x_axis(), Vector3::y_axis(), Vector3::z_axis()][k as usize % 3];
+        let off = UnitQuaternion::from_axis_angle(&axis, 2f64.to_radians());
+        let tracked = truth * Rigid::from_parts(Translation3::identity(), off);
+        let i = model.integrate(&seen, &tracked);
+        assert!(!i.reset, "frame {k}: {i:?}");
+        tested += i.voxels_tested;
+        contradicted += i.voxels_contradicted;
+    }
+    assert!(
+        contradicted * 20 < tested,
+        "{contradicted} of {tested} judged voxels seen through"
+    );
+}

@@ -130,26 +130,35 @@ impl DepthView {
 
     /// What this view says of `p`.
     pub fn evidence(&self, p: &Vec3) -> Evidence {
-        let margin = self.margin;
+        self.evidence_and_within(p, 0.0).0
+    }
+
+    /// What this view says of `p`, and what it says with its seen surface
+    /// at least `thick` thick (one lookup for both).
+    pub fn evidence_and_within(&self, p: &Vec3, thick: f64) -> (Evidence, Evidence) {
         let Some(seen) = self.image.nearest_around(p).map(f64::from) else {
             // Beyond the image, but in front of the camera: the camera saw
             // past the segmented object there.
-            return if self.image.frame().depth(p) > 0.0 {
+            let e = if self.image.frame().depth(p) > 0.0 {
                 Evidence::OutsideSilhouette
             } else {
                 Evidence::Unknown
             };
+            return (e, e);
         };
         let r = self.image.frame().range(p);
-        if seen.is_infinite() {
-            Evidence::OutsideSilhouette
-        } else if r + margin < seen {
-            Evidence::SeenThrough
-        } else if r <= seen + margin {
-            Evidence::Surface
-        } else {
-            Evidence::Unknown
-        }
+        let judge = |margin: f64| {
+            if seen.is_infinite() {
+                Evidence::OutsideSilhouette
+            } else if r + margin < seen {
+                Evidence::SeenThrough
+            } else if r <= seen + margin {
+                Evidence::Surface
+            } else {
+                Evidence::Unknown
+            }
+        };
+        (judge(self.margin), judge(self.margin.max(thick)))
     }
 }
 

@@ -478,6 +478,10 @@ pub struct FrameResult {
     /// Bytes the object's fused model holds after this frame (never more
     /// than [`crate::model::ModelConfig::max_bytes`]; `None` without a model).
     pub model_bytes: Option<usize>,
+    /// This frame's view saw through more than `pipeline.model.reset_share`
+    /// of the fused model, which restarted from the view (the object
+    /// changed or was swapped). A cold frame's restart is not counted.
+    pub model_reset: bool,
 }
 
 /// Running counts of a stream.
@@ -757,7 +761,7 @@ impl Tracker {
         let rebuilds = membranes.rebuild.is_some();
         let (path, mut reason, mut warm, motion) =
             self.choose_path(cloud, centroid, size, cfg, rebuilds);
-        let fused_all = self.fuse(raw, path, motion, size, cfg);
+        let (fused_all, model_reset) = self.fuse(raw, path, motion, size, cfg);
         let mut model_restarted = false;
         let mut rebuild_wait = Duration::ZERO;
         if let Some(w) = warm.as_mut() {
@@ -947,12 +951,14 @@ impl Tracker {
                 (_, f) => f.as_ref().map(|f| f.model.points_in(&f.pose)),
             },
             model_bytes: self.fused.as_ref().map(|f| f.model.bytes()),
+            model_reset,
         })
     }
 
     /// Fuse this frame into the stream's model (unless `pipeline.model` is
     /// null) and return the fused points in this frame's cloud frame, the
-    /// input of the membrane. A cold frame restarts the model.
+    /// input of the membrane, and whether the view restarted the model
+    /// ([`FrameResult::model_reset`]). A cold frame restarts the model.
     fn fuse(
         &mut self,
         raw: &PointCloud,
@@ -960,20 +966,24 @@ impl Tracker {
         motion: Option<align::Rigid>,
         size: f64,
         cfg: &PipelineConfig,
-    ) -> Option<PointCloud> {
-        cfg.model.as_ref()?;
-        // A warm frame, or a refit (cold, with a motion), moves the model on.
-        match (path, motion) {
-            (_, Some(m)) if self.fused.is_some() => {
-                if let Some(f) = self.fused.as_mut() {
-                    f.pose = m * f.pose;
-                    f.model.integrate(&raw.points, &f.pose);
-                }
-            }
-            _ => self.restart_fused(raw, size, cfg),
+    ) -> (Option<PointCloud>, bool) {
+        if cfg.model.is_none() {
+            return (None, false);
         }
-        let f = self.fused.as_ref()?;
-        Some(PointCloud::from_points(f.model.points_in(&f.pose)))
+        // A warm frame, or a refit (cold, with a motion), moves the model on.
+        let reset = match (path, motion, self.fused.as_mut()) {
+            (_, Some(m), Some(f)) => {
+                f.pose = m * f.pose;
+                f.model.integrate(&raw.points, &f.pose).reset
+            }
+            _ => {
+                self.restart_fused(raw, size, cfg);
+                false
+            }
+        };
+        let points =
+            (self.fused.as_ref()).map(|f| PointCloud::from_points(f.model.points_in(&f.pose)));
+        (points, reset)
     }
 
     /// Start the warm frame `warm` from the stream's background rebuild
