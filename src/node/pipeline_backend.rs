@@ -170,6 +170,11 @@ impl EngineProcessor {
         } else {
             ""
         };
+        let model_note = if r.model_reset {
+            "; its view saw through the fused model, which restarted from it (the object changed or was swapped)"
+        } else {
+            ""
+        };
         out.objects.push(ObjectReport {
             stream: r.stream.to_string(),
             eta_g: rep.eta_final,
@@ -177,7 +182,7 @@ impl EngineProcessor {
             warm,
             level,
             message: format!(
-                "{} start ({}), stop: {}, surface {}{shown_note}{frame_note}",
+                "{} start ({}), stop: {}, surface {}{shown_note}{frame_note}{model_note}",
                 if warm { "warm" } else { "cold" },
                 r.reason,
                 rep.stop,
@@ -409,22 +414,32 @@ mod tests {
 
     /// The `/diagnostics` message of one frame of `points`.
     fn message(points: Vec<Vec3>) -> String {
-        let cfg = Config::load(None, &[]).unwrap();
+        let cloud = PointCloud::from_points(points);
+        let payload = wire::encode(&encode_pointcloud2(&cloud, Header::default())).unwrap();
+        messages("/sphere/points", &[payload], &[]).remove(0)
+    }
+
+    /// The `/diagnostics` messages of the frames `payloads` (encoded
+    /// PointCloud2) on `topic`, with the configuration changed by `sets`.
+    fn messages(topic: &str, payloads: &[Vec<u8>], sets: &[String]) -> Vec<String> {
+        let cfg = Config::load(None, sets).unwrap();
         let backend =
             PipelineBackend::new(&cfg.membrane, cfg.pipeline.clone(), cfg.wire.clone()).unwrap();
-        let mut processor = backend.processor("/sphere/points");
-        let cloud = PointCloud::from_points(points);
-        let frame = Frame {
-            topic: "/sphere/points".into(),
-            payload: wire::encode(&encode_pointcloud2(&cloud, Header::default())).unwrap(),
-            received_ns: 0,
-            source_ns: None,
-            sequence: None,
-            deadline: Instant::now() + Duration::from_secs(10),
+        let mut processor = backend.processor(topic);
+        let mut message = |payload: &Vec<u8>| {
+            let frame = Frame {
+                topic: topic.into(),
+                payload: payload.clone(),
+                received_ns: 0,
+                source_ns: None,
+                sequence: None,
+                deadline: Instant::now() + Duration::from_secs(10),
+            };
+            let result = processor.process(&frame, &mut |_| {});
+            assert_eq!(result.error, None);
+            result.objects[0].message.clone()
         };
-        let result = processor.process(&frame, &mut |_| {});
-        assert_eq!(result.error, None);
-        result.objects[0].message.clone()
+        payloads.iter().map(&mut message).collect()
     }
 
     #[test]
@@ -435,5 +450,27 @@ mod tests {
         // seen from that frame's origin.
         let aside = message(sphere_image(Vec3::new(0.5, 0.0, 0.0)));
         assert!(aside.contains("not one depth image"), "{aside}");
+    }
+
+    #[test]
+    fn a_view_that_restarts_the_model_is_named_in_its_status() {
+        // The committed swap (a box, a bottle from frame 10, a mug from
+        // frame 20) with the track never lost: no cold start restarts the
+        // model, and the mug's view sees through the bottle's model.
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/data/bags/robot_view/swap.mcap"
+        );
+        let topic = "/synth/rounded_box_then_bottle_then_mug/points";
+        let bag = crate::bag::Bag::open(std::path::Path::new(path)).unwrap();
+        let payloads: Vec<Vec<u8>> = (bag.read(&[topic]).unwrap().into_iter())
+            .take(23)
+            .map(|m| m.data)
+            .collect();
+        let sets = ["pipeline.icp_min_inliers=null".to_owned()];
+        let shown = messages(topic, &payloads, &sets);
+        let named = |m: &String| m.contains("fused model, which restarted");
+        assert!(!shown[..20].iter().any(named), "{shown:#?}");
+        assert!(shown[20..].iter().any(named), "{shown:#?}");
     }
 }
