@@ -761,7 +761,7 @@ impl Tracker {
         let rebuilds = membranes.rebuild.is_some();
         let (path, mut reason, mut warm, motion) =
             self.choose_path(cloud, centroid, size, cfg, rebuilds);
-        let (fused_all, model_reset) = self.fuse(raw, path, motion, size, cfg);
+        let (fused_all, model_reset) = self.fuse(raw, motion, size, cfg);
         let mut model_restarted = false;
         let mut rebuild_wait = Duration::ZERO;
         if let Some(w) = warm.as_mut() {
@@ -962,7 +962,6 @@ impl Tracker {
     fn fuse(
         &mut self,
         raw: &PointCloud,
-        path: StartPath,
         motion: Option<align::Rigid>,
         size: f64,
         cfg: &PipelineConfig,
@@ -971,8 +970,8 @@ impl Tracker {
             return (None, false);
         }
         // A warm frame, or a refit (cold, with a motion), moves the model on.
-        let reset = match (path, motion, self.fused.as_mut()) {
-            (_, Some(m), Some(f)) => {
+        let reset = match (motion, self.fused.as_mut()) {
+            (Some(m), Some(f)) => {
                 f.pose = m * f.pose;
                 f.model.integrate(&raw.points, &f.pose).reset
             }
