@@ -449,6 +449,11 @@ impl ObjectModel {
         self.latest = None;
     }
 
+    /// The voxel edge (m): the spacing of [`Self::points_in`].
+    pub fn voxel_edge(&self) -> f64 {
+        self.memory.voxel_size()
+    }
+
     /// Voxels stored.
     pub fn voxel_count(&self) -> usize {
         self.memory.len()

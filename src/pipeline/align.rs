@@ -186,6 +186,65 @@ pub fn inlier_share(
     align(index, None, data, *motion, 0, trim, max_points).inlier_fraction
 }
 
+/// The share of `data` (at most `max_points`, evenly strided) that a point
+/// set without normals explains under `motion`, judged on its tangent
+/// planes: a sampled point counts when, brought back by `motion`'s inverse,
+/// its nearest model point lies within `reach` and the point within `trim`
+/// of that model point's plane (the normal of its `normal_k` nearest
+/// neighbours; within `trim` of the point itself where no normal can be
+/// estimated).
+///
+/// [`inlier_share`] measures the distance to the nearest point, which on
+/// a model of voxel means is the sampling's as much as the fit's: with
+/// voxels of edge `e`, a point of the true surface lies up to `e/√2` from
+/// the nearest mean along the surface. The turning bottle's model (6.4 mm
+/// voxels) explained 0.736 of a well-aligned frame within a 3.3 mm trim,
+/// below the refit's 0.75, and the frame restarted cold. `reach` (the
+/// voxel edge, at least `trim`) takes the tangential part out; the
+/// distance along the normal still has to be within `trim`.
+pub fn plane_inlier_share(
+    index: &KnnIndex,
+    data: &[Vec3],
+    motion: &Rigid,
+    [trim, reach]: [f64; 2],
+    max_points: usize,
+    normal_k: usize,
+) -> f64 {
+    let (inv, reach) = (motion.inverse(), reach.max(trim));
+    let stride = (data.len() / max_points.max(1)).max(1);
+    let mut wanted = vec![false; index.len()];
+    let matches: Vec<Option<(usize, Vec3)>> = data
+        .iter()
+        .step_by(stride)
+        .map(|q| {
+            let local = inv.transform_point(&(*q).into()).coords;
+            let (d2, vertex) = index.nearest_one(&local);
+            let near = d2 <= reach * reach;
+            if near {
+                wanted[vertex] = true;
+            }
+            near.then_some((vertex, local))
+        })
+        .collect();
+    let Ok(normals) = crate::normals::estimate_normals_where(index, normal_k, &wanted) else {
+        return inlier_share(index, data, motion, trim, max_points);
+    };
+    let model = index.points();
+    let explained = matches
+        .iter()
+        .flatten()
+        .filter(|&&(v, local)| {
+            let (d, n) = (local - model[v], normals[v]);
+            if n == Vec3::zeros() {
+                d.norm() <= trim
+            } else {
+                n.dot(&d).abs() <= trim
+            }
+        })
+        .count();
+    explained as f64 / matches.len().max(1) as f64
+}
+
 /// [`align`] onto a point set without normals (the fused model's points):
 /// the points that the data's sampled points match at `initial` (within
 /// `trim`) get a normal from their `normal_k` nearest neighbours, and the
@@ -531,5 +590,54 @@ mod tests {
             inlier_share(&KnnIndex::new(Vec::new()), &data, &motion, 0.02, 10),
             0.0
         );
+    }
+
+    /// A plane sampled like a model of voxel means (one point per 6 mm
+    /// cell, jittered) and a dense view of the same plane.
+    fn voxel_plane_and_view(edge: f64) -> (Vec<Vec3>, Vec<Vec3>) {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut jitter = || edge * (rng.random::<f64>() - 0.5) * 0.5;
+        let model = (0..400)
+            .map(|k| {
+                Vec3::new(
+                    ((k % 20) as f64 + 0.5) * edge + jitter(),
+                    ((k / 20) as f64 + 0.5) * edge + jitter(),
+                    0.0,
+                )
+            })
+            .collect();
+        let view = (0..3600)
+            .map(|k| {
+                Vec3::new(
+                    (k % 60) as f64 * edge / 3.0,
+                    (k / 60) as f64 * edge / 3.0,
+                    0.0,
+                )
+            })
+            .collect();
+        (model, view)
+    }
+
+    #[test]
+    fn the_plane_share_counts_a_view_of_the_models_surface_whatever_its_sampling() {
+        let edge = 0.006;
+        let (model, view) = voxel_plane_and_view(edge);
+        let index = KnnIndex::new(model);
+        let (trim, at) = (0.0033, Rigid::identity());
+        // To the nearest voxel mean, a point of the very surface is often
+        // farther than the trim.
+        let nearest = inlier_share(&index, &view, &at, trim, 10_000);
+        assert!(nearest < 0.85, "nearest-point share {nearest}");
+        let plane = plane_inlier_share(&index, &view, &at, [trim, edge], 10_000, 10);
+        assert!(plane > 0.98, "plane share {plane}");
+        // Off the surface by more than the trim, along its normal, no point
+        // counts; without the reach, the tangential part counts again.
+        let lifted = Rigid::translation(0.0, 0.0, 2.0 * trim);
+        assert_eq!(
+            plane_inlier_share(&index, &view, &lifted, [trim, edge], 10_000, 10),
+            0.0
+        );
+        let short = plane_inlier_share(&index, &view, &at, [trim, trim], 10_000, 10);
+        assert!(short < plane - 0.1, "share within the trim only {short}");
     }
 }

@@ -201,8 +201,9 @@ pub const MAX_FRAME_POINTS: usize = 50_000;
 
 /// `pipeline.refit`: when the surface, not the track, was lost. A frame the
 /// aligned previous surface explains too poorly (`icp_min_inliers`) but
-/// whose points lie within `icp_trim` of the fused model's under the same
-/// motion, as a share of at least `min_model_inliers`, gets a cold
+/// whose points lie within `icp_trim` of the fused model's surface under
+/// the same motion ([`align::plane_inlier_share`]), as a share of at least
+/// `min_model_inliers`, gets a cold
 /// membrane on the fused model, which keeps its views and pose: in the
 /// frame or in the background ([`RefitPath`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -1128,6 +1129,7 @@ impl Tracker {
         let reason = if lost {
             let fused = fused
                 .as_ref()
+                .zip(self.fused.as_ref().map(|f| f.model.voxel_edge()))
                 .filter(|_| alignment.is_some() && !prev.refitted);
             let choice = refit_or_lost(fused, cloud, motion, inliers, scale, cfg);
             let background = cfg
@@ -1202,10 +1204,11 @@ fn on_previous(
 
 /// The start of a frame the aligned previous surface no longer explains
 /// (`inliers` below `icp_min_inliers`): a refit on the fused model's points
-/// `fused` when they explain at least `refit.min_model_inliers` of the
-/// frame under `motion`, else a lost track.
+/// `fused` (with the model's voxel edge) when they explain at least
+/// `refit.min_model_inliers` of the frame under `motion`
+/// ([`align::plane_inlier_share`]), else a lost track.
 fn refit_or_lost(
-    fused: Option<&KnnIndex>,
+    fused: Option<(&KnnIndex, f64)>,
     cloud: &PointCloud,
     motion: align::Rigid,
     inliers: f64,
@@ -1213,10 +1216,19 @@ fn refit_or_lost(
     cfg: &PipelineConfig,
 ) -> Choice {
     let (trim, max) = (cfg.icp_trim * scale, cfg.icp_max_points);
-    let refit = fused.zip(cfg.refit.as_ref()).and_then(|(index, r)| {
-        let model = align::inlier_share(index, &cloud.points, &motion, trim, max);
-        (model >= r.min_model_inliers.get()).then_some(model)
-    });
+    let normal_k = cfg
+        .model_icp
+        .as_ref()
+        .map(|m| m.normal_k)
+        .unwrap_or_default();
+    let refit = fused
+        .zip(cfg.refit.as_ref())
+        .and_then(|((index, edge), r)| {
+            let (points, reach) = (&cloud.points, [trim, edge]);
+            let model =
+                align::plane_inlier_share(index, points, &motion, reach, max, normal_k.get());
+            (model >= r.min_model_inliers.get()).then_some(model)
+        });
     match refit {
         Some(model) => (
             StartPath::Cold,
