@@ -166,11 +166,13 @@ impl EngineProcessor {
         // The flying-pixel filter and the fused model take the cloud
         // frame's origin for the camera (pipeline::flying).
         let frame_note = if r.flying.not_an_image {
+            reasons::bump(&mut out.counts, reasons::NOT_AN_IMAGE, 1);
             "; not one depth image seen from its frame's origin (publish it in the camera's optical frame)"
         } else {
             ""
         };
         let model_note = if r.model_reset {
+            reasons::bump(&mut out.counts, reasons::MODELS_RESTARTED, 1);
             "; its view saw through the fused model, which restarted from it (the object changed or was swapped)"
         } else {
             ""
@@ -412,8 +414,17 @@ mod tests {
         view.into_iter().map(|(_, _, p)| p + shift).collect()
     }
 
+    /// A frame's first object's `/diagnostics` message, and the frame's
+    /// counts by reason.
+    type Shown = (String, Vec<(&'static str, u64)>);
+
+    /// The count of `reason` in a frame's counts.
+    fn count(shown: &Shown, reason: &str) -> u64 {
+        shown.1.iter().filter(|(r, _)| *r == reason).map(|(_, n)| n).sum()
+    }
+
     /// The `/diagnostics` message of one frame of `points`.
-    fn message(points: Vec<Vec3>) -> String {
+    fn message(points: Vec<Vec3>) -> Shown {
         let cloud = PointCloud::from_points(points);
         let payload = wire::encode(&encode_pointcloud2(&cloud, Header::default())).unwrap();
         messages("/sphere/points", &[payload], &[]).remove(0)
@@ -421,7 +432,7 @@ mod tests {
 
     /// The `/diagnostics` messages of the frames `payloads` (encoded
     /// PointCloud2) on `topic`, with the configuration changed by `sets`.
-    fn messages(topic: &str, payloads: &[Vec<u8>], sets: &[String]) -> Vec<String> {
+    fn messages(topic: &str, payloads: &[Vec<u8>], sets: &[String]) -> Vec<Shown> {
         let cfg = Config::load(None, sets).unwrap();
         let backend =
             PipelineBackend::new(&cfg.membrane, cfg.pipeline.clone(), cfg.wire.clone()).unwrap();
@@ -437,7 +448,7 @@ mod tests {
             };
             let result = processor.process(&frame, &mut |_| {});
             assert_eq!(result.error, None);
-            result.objects[0].message.clone()
+            (result.objects[0].message.clone(), result.counts)
         };
         payloads.iter().map(&mut message).collect()
     }
@@ -445,11 +456,13 @@ mod tests {
     #[test]
     fn a_cloud_outside_the_cameras_frame_is_named_in_its_status() {
         let seen = message(sphere_image(Vec3::zeros()));
-        assert!(!seen.contains("not one depth image"), "{seen}");
+        assert!(!seen.0.contains("not one depth image"), "{seen:?}");
+        assert_eq!(count(&seen, reasons::NOT_AN_IMAGE), 0);
         // The same points in a frame 0.5 m aside: not on one pixel grid
         // seen from that frame's origin.
         let aside = message(sphere_image(Vec3::new(0.5, 0.0, 0.0)));
-        assert!(aside.contains("not one depth image"), "{aside}");
+        assert!(aside.0.contains("not one depth image"), "{aside:?}");
+        assert_eq!(count(&aside, reasons::NOT_AN_IMAGE), 1);
     }
 
     #[test]
@@ -469,8 +482,12 @@ mod tests {
             .collect();
         let sets = ["pipeline.icp_min_inliers=null".to_owned()];
         let shown = messages(topic, &payloads, &sets);
-        let named = |m: &String| m.contains("fused model, which restarted");
+        let named = |m: &Shown| m.0.contains("fused model, which restarted");
         assert!(!shown[..20].iter().any(named), "{shown:#?}");
         assert!(shown[20..].iter().any(named), "{shown:#?}");
+        // Counted under its own reason, once per frame that named it.
+        for s in &shown {
+            assert_eq!(count(s, reasons::MODELS_RESTARTED), u64::from(named(s)));
+        }
     }
 }

@@ -5,7 +5,9 @@
 //! under a reason of its own, so an operator can tell a buggy segmenter
 //! (`objects_skipped`, `labels_evicted`, `labels_reidentified`) from a broken bridge
 //! (`malformed_cdr`), a size lie (`too_large`, `invalid_layout`) or an
-//! overloaded node (`over_budget`, `outputs_failed`, `drops`). Counters are
+//! overloaded node (`over_budget`, `outputs_failed`, `drops`), and a fused
+//! model that keeps being discarded (`models_restarted`) and clouds
+//! published outside the camera's frame (`not_an_image`). Counters are
 //! plain `u64` sums per stream; the node status adds them over all streams,
 //! evicted ones included.
 
@@ -40,9 +42,20 @@ pub const OVER_BUDGET: &str = "over_budget";
 pub const OUTPUTS_FAILED: &str = "outputs_failed";
 /// Object frames that failed in the pipeline (too few points, membrane error).
 pub const OBJECT_ERRORS: &str = "object_errors";
+/// Object frames whose view saw through more than `pipeline.model.reset_share`
+/// of the object's fused model, which was discarded and restarted from
+/// that view: the object changed or was swapped, or a view disagreed
+/// with what earlier views had fused. A tracker that keeps restarting its
+/// model never completes the object's unseen side.
+pub const MODELS_RESTARTED: &str = "models_restarted";
+/// Object frames whose cloud was not one depth image seen from its frame's
+/// origin: the flying-pixel filter kept every point and the fused model
+/// took a wrong camera position (publish the cloud in the camera's optical
+/// frame).
+pub const NOT_AN_IMAGE: &str = "not_an_image";
 
 /// Every reason, in the order `/diagnostics` lists them.
-pub const ALL: [&str; 10] = [
+pub const ALL: [&str; 12] = [
     MALFORMED_CDR,
     TOO_LARGE,
     INVALID_LAYOUT,
@@ -53,6 +66,8 @@ pub const ALL: [&str; 10] = [
     OVER_BUDGET,
     OUTPUTS_FAILED,
     OBJECT_ERRORS,
+    MODELS_RESTARTED,
+    NOT_AN_IMAGE,
 ];
 
 /// The reason a sample was rejected.
