@@ -62,6 +62,14 @@ fn healthy_streams_keep_meshing_and_every_hostile_input_is_counted() {
         "{}",
         kinds["churn"]
     );
+    // The healthy streams are whole ellipsoid surfaces, not one depth
+    // image seen from their frame's origin: counted frame by frame.
+    let not_an_image = j["reasons"]["not_an_image"].as_u64().unwrap();
+    assert!(
+        not_an_image >= 100,
+        "not_an_image {not_an_image}: {}",
+        j["reasons"]
+    );
     let statuses = j["hostile"]["diagnostics_max_statuses"].as_u64().unwrap();
     assert!(statuses <= 1 + 7 * 64, "{statuses} statuses");
     let bytes = j["hostile"]["diagnostics_max_bytes"].as_u64().unwrap();
@@ -100,6 +108,8 @@ fn a_looped_replay_keeps_the_fused_model_under_its_cap() {
     assert!(meshed >= 0.5, "meshed {meshed}: {j}");
     assert_eq!(j["input_streams"], 1, "{j}");
     assert!(j["own_outputs"].as_u64().unwrap() > 0, "{j}");
+    // The synth clouds are depth images in the camera's frame.
+    assert_eq!(j["reasons"]["not_an_image"], 0, "{}", j["reasons"]);
     // The cap stated in launch/sepmem.json5: max_voxels * 66 + (max_views
     // + 1) * 4 * view_side^2 at the defaults (60000, 12, 160).
     let cap = 60_000 * 66 + 13 * 4 * 160 * 160;

@@ -420,7 +420,12 @@ mod tests {
 
     /// The count of `reason` in a frame's counts.
     fn count(shown: &Shown, reason: &str) -> u64 {
-        shown.1.iter().filter(|(r, _)| *r == reason).map(|(_, n)| n).sum()
+        shown
+            .1
+            .iter()
+            .filter(|(r, _)| *r == reason)
+            .map(|(_, n)| n)
+            .sum()
     }
 
     /// The `/diagnostics` message of one frame of `points`.
