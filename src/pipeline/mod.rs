@@ -1057,9 +1057,16 @@ impl Tracker {
         urgency: rebuild::Urgency,
     ) {
         let hastened = self.rebuild.as_ref().is_some_and(|p| p.is_hastened());
-        if path == StartPath::Cold || (urgent && !hastened) {
+        let starved = self.rebuild.as_ref().is_some_and(|p| p.is_starved(frame));
+        if path == StartPath::Cold || (urgent && !hastened) || starved {
             self.rebuild = None;
         }
+        let urgency = if starved {
+            tracing::debug!(stream = %self.key, frame, "rebuild starved at the lowest priority: restarted at a higher one");
+            rebuild::Urgency::Starved
+        } else {
+            urgency
+        };
         let (Some(workers), Some(f)) = (&membranes.rebuild, &self.fused) else {
             return;
         };
