@@ -113,8 +113,8 @@ pub struct RebuildConfig {
     pub max_misfit: Option<Factor>,
     /// A rebuild at the lowest priority ([`Urgency::Idle`]) still not done
     /// this many frames after it was due is starved: the machine has no
-    /// idle time for it. It restarts on the stream's newer model at the
-    /// process's own priority ([`Urgency::Awaited`]'s pool). `None`: it
+    /// idle time for it. It restarts on the stream's newer model on a pool
+    /// of its own at [`STARVED_NICE`] ([`Urgency::Starved`]). `None`: it
     /// waits for idle time however long that takes.
     #[serde(default)]
     pub starved_frames: Option<NonZeroUsize>,
