@@ -210,23 +210,9 @@ pub fn plane_inlier_share(
     max_points: usize,
     normal_k: usize,
 ) -> f64 {
-    let (inv, reach) = (motion.inverse(), reach.max(trim));
-    let stride = (data.len() / max_points.max(1)).max(1);
-    let mut wanted = vec![false; index.len()];
-    let matches: Vec<Option<(usize, Vec3)>> = data
-        .iter()
-        .step_by(stride)
-        .map(|q| {
-            let local = inv.transform_point(&(*q).into()).coords;
-            let (d2, vertex) = index.nearest_one(&local);
-            let near = d2 <= reach * reach;
-            if near {
-                wanted[vertex] = true;
-            }
-            near.then_some((vertex, local))
-        })
-        .collect();
-    let Ok(normals) = crate::normals::estimate_normals_where(index, normal_k, &wanted) else {
+    let (matches, normals) =
+        matched_normals(index, data, motion, reach.max(trim), max_points, normal_k);
+    let Ok(normals) = normals else {
         return inlier_share(index, data, motion, trim, max_points);
     };
     let model = index.points();
@@ -243,6 +229,42 @@ pub fn plane_inlier_share(
         })
         .count();
     explained as f64 / matches.len().max(1) as f64
+}
+
+/// A model's normals at the points some sample matched (zero elsewhere).
+type NormalsAt = Result<Vec<Vec3>, crate::normals::NormalsError>;
+
+/// The sampled points of `data` (at most `max_points`, evenly strided)
+/// brought back by `motion`'s inverse, each with its nearest point of
+/// `index` when that lies within `reach`, and the normals (from `normal_k`
+/// neighbours) of just those matched points: the others get the zero
+/// vector.
+fn matched_normals(
+    index: &KnnIndex,
+    data: &[Vec3],
+    motion: &Rigid,
+    reach: f64,
+    max_points: usize,
+    normal_k: usize,
+) -> (Vec<Option<(usize, Vec3)>>, NormalsAt) {
+    let inv = motion.inverse();
+    let stride = (data.len() / max_points.max(1)).max(1);
+    let mut wanted = vec![false; index.len()];
+    let matches = data
+        .iter()
+        .step_by(stride)
+        .map(|q| {
+            let local = inv.transform_point(&(*q).into()).coords;
+            let (d2, vertex) = index.nearest_one(&local);
+            let near = d2 <= reach * reach;
+            if near {
+                wanted[vertex] = true;
+            }
+            near.then_some((vertex, local))
+        })
+        .collect();
+    let normals = crate::normals::estimate_normals_where(index, normal_k, &wanted);
+    (matches, normals)
 }
 
 /// [`align`] onto a point set without normals (the fused model's points):
@@ -265,16 +287,8 @@ pub fn align_to_points(
     max_points: usize,
     normal_k: usize,
 ) -> Option<Alignment> {
-    let inv = initial.inverse();
-    let stride = (data.len() / max_points.max(1)).max(1);
-    let mut wanted = vec![false; index.len()];
-    for q in data.iter().step_by(stride) {
-        let (d2, vertex) = index.nearest_one(&inv.transform_point(&(*q).into()).coords);
-        if d2 <= trim * trim {
-            wanted[vertex] = true;
-        }
-    }
-    let normals = crate::normals::estimate_normals_where(index, normal_k, &wanted).ok()?;
+    let (_, normals) = matched_normals(index, data, &initial, trim, max_points, normal_k);
+    let normals = normals.ok()?;
     Some(align(
         index,
         Some(&normals),
