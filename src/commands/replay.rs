@@ -337,6 +337,8 @@ pub fn run_opts(
     let (mut detached, mut flying) = (Dropped::default(), Dropped::default());
     // Frames the flying-pixel filter found not one depth image.
     let mut not_an_image = 0usize;
+    // Frames that restarted a rebuild starved at the lowest priority.
+    let mut rebuilds_starved = 0usize;
     for m in &messages {
         bar.inc(1);
         let now = i64::try_from(m.log_time).unwrap_or(i64::MAX);
@@ -357,6 +359,7 @@ pub fn run_opts(
                     detached.add(r.reconstruction.report.points_detached);
                     flying.add(r.flying.dropped);
                     not_an_image += usize::from(r.flying.not_an_image);
+                    rebuilds_starved += usize::from(r.rebuild_starved);
                     match r.path {
                         StartPath::Warm => {
                             warm_it.push(r.iterations as f64);
@@ -553,6 +556,11 @@ pub fn run_opts(
     if not_an_image > 0 {
         println!(
             "not a depth image: {not_an_image} frames were not one depth image seen from their frame's origin; the flying-pixel filter kept their points (publish the segmented cloud in the camera's optical frame)"
+        );
+    }
+    if rebuilds_starved > 0 {
+        println!(
+            "rebuilds starved: {rebuilds_starved} frames found their background rebuild not done pipeline.rebuild.starved_frames after it was due and restarted it at a higher priority (the machine had no idle time for it)"
         );
     }
     for (id, st) in &per_stream {

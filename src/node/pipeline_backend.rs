@@ -171,6 +171,9 @@ impl EngineProcessor {
         } else {
             ""
         };
+        if r.rebuild_starved {
+            reasons::bump(&mut out.counts, reasons::REBUILDS_STARVED, 1);
+        }
         let model_note = if r.model_reset {
             reasons::bump(&mut out.counts, reasons::MODELS_RESTARTED, 1);
             "; its view saw through the fused model, which restarted from it (the object changed or was swapped)"

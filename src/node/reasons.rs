@@ -6,8 +6,9 @@
 //! (`objects_skipped`, `labels_evicted`, `labels_reidentified`) from a broken bridge
 //! (`malformed_cdr`), a size lie (`too_large`, `invalid_layout`) or an
 //! overloaded node (`over_budget`, `outputs_failed`, `drops`), and a fused
-//! model that keeps being discarded (`models_restarted`) and clouds
-//! published outside the camera's frame (`not_an_image`). Counters are
+//! model that keeps being discarded (`models_restarted`), clouds
+//! published outside the camera's frame (`not_an_image`) and a machine too
+//! busy for the fused model's background rebuilds (`rebuilds_starved`). Counters are
 //! plain `u64` sums per stream; the node status adds them over all streams,
 //! evicted ones included.
 
@@ -54,8 +55,14 @@ pub const MODELS_RESTARTED: &str = "models_restarted";
 /// frame).
 pub const NOT_AN_IMAGE: &str = "not_an_image";
 
+/// Object frames that found their stream's background rebuild of the fused
+/// model (`pipeline.rebuild`) starved at the lowest priority and restarted
+/// it at a higher one: the machine has no idle time for the rebuilds, and
+/// the object's surface follows the fused model later than it could.
+pub const REBUILDS_STARVED: &str = "rebuilds_starved";
+
 /// Every reason, in the order `/diagnostics` lists them.
-pub const ALL: [&str; 12] = [
+pub const ALL: [&str; 13] = [
     MALFORMED_CDR,
     TOO_LARGE,
     INVALID_LAYOUT,
@@ -68,6 +75,7 @@ pub const ALL: [&str; 12] = [
     OBJECT_ERRORS,
     MODELS_RESTARTED,
     NOT_AN_IMAGE,
+    REBUILDS_STARVED,
 ];
 
 /// The reason a sample was rejected.

@@ -483,6 +483,10 @@ pub struct FrameResult {
     /// of the fused model, which restarted from the view (the object
     /// changed or was swapped). A cold frame's restart is not counted.
     pub model_reset: bool,
+    /// This frame found its stream's background rebuild starved at the
+    /// lowest priority (`pipeline.rebuild.starved_frames` after it was due)
+    /// and restarted it at a higher one: the machine had no idle time for it.
+    pub rebuild_starved: bool,
 }
 
 /// Running counts of a stream.
@@ -919,10 +923,13 @@ impl Tracker {
         let cut_short = rec.report.stop == membrane::StopReason::Deadline;
         let refit = matches!(reason, PathReason::Refit { .. });
         let urgent = final_path == StartPath::Warm && (refit || was_completed != completed);
-        match final_path {
-            StartPath::Cold if !cut_short => self.rebuild = None,
+        let rebuild_starved = match final_path {
+            StartPath::Cold if !cut_short => {
+                self.rebuild = None;
+                false
+            }
             _ => self.start_rebuild(final_path, urgent, membranes, cfg, frame, urgency),
-        }
+        };
         // The published mesh without the centring's curvature bias; the
         // alignment above and the next warm start keep the surface's own.
         rec.unbias_mesh();
@@ -953,6 +960,7 @@ impl Tracker {
             },
             model_bytes: self.fused.as_ref().map(|f| f.model.bytes()),
             model_reset,
+            rebuild_starved,
         })
     }
 
@@ -1047,6 +1055,9 @@ impl Tracker {
     /// done, and replacing it at every refit starved the live node's refits
     /// (`sepmem replay --realtime` of the orbited YCB banana: 18 refits in a
     /// row from frame 12, none adopted).
+    ///
+    /// Returns whether it restarted a starved rebuild
+    /// ([`FrameResult::rebuild_starved`]).
     fn start_rebuild(
         &mut self,
         path: StartPath,
@@ -1055,7 +1066,7 @@ impl Tracker {
         cfg: &PipelineConfig,
         frame: u64,
         urgency: rebuild::Urgency,
-    ) {
+    ) -> bool {
         let hastened = self.rebuild.as_ref().is_some_and(|p| p.is_hastened());
         let starved = self.rebuild.as_ref().is_some_and(|p| p.is_starved(frame));
         if path == StartPath::Cold || (urgent && !hastened) || starved {
@@ -1068,7 +1079,7 @@ impl Tracker {
             urgency
         };
         let (Some(workers), Some(f)) = (&membranes.rebuild, &self.fused) else {
-            return;
+            return starved;
         };
         if self.rebuild.is_none() {
             let budget = Budget::iterations(cold_cap(membranes.cold.config(), cfg));
@@ -1079,6 +1090,7 @@ impl Tracker {
         if let (Some(pending), true) = (self.rebuild.as_mut(), urgent) {
             pending.hasten(frame.saturating_add(1));
         }
+        starved
     }
 
     /// A new model from this frame alone, in this frame's cloud frame.

@@ -554,6 +554,51 @@ mod tests {
         assert!(matches!(idle.adopt(100, false), Adopt::Surface(_)));
     }
 
+    #[test]
+    fn a_frame_that_restarts_a_starved_rebuild_says_so() {
+        // The committed turning capsule, each frame with a deadline (a
+        // minute away: it never waits for its rebuild), the idle pool held.
+        let cfg = crate::config::Config::load(None, &[]).unwrap();
+        let membranes = Membranes::new(&cfg.membrane, &cfg.pipeline).unwrap();
+        let workers = membranes.rebuild.as_ref().unwrap();
+        let (release, held) = crossbeam_channel::bounded::<()>(0);
+        workers.idle.spawn(move || {
+            let _ = held.recv();
+        });
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/data/bags/robot_view/turn_capsule.mcap"
+        );
+        let topic = "/synth/capsule/points";
+        let bag = crate::bag::Bag::open(std::path::Path::new(path)).unwrap();
+        let mut tracker = crate::pipeline::Tracker::new(crate::pipeline::StreamKey::topic(topic));
+        let mut flagged = Vec::new();
+        for m in bag.read(&[topic]).unwrap().iter().take(12) {
+            let sample =
+                crate::pipeline::engine::decode_sample(topic, &m.data, &cfg.wire, &cfg.pipeline)
+                    .unwrap();
+            let before = tracker.rebuild_started();
+            let deadlines = crate::pipeline::Deadlines::after(Instant::now(), 6e4, 6e4);
+            let r = (tracker.process_by(
+                &sample.streams[0].cloud,
+                &membranes,
+                &cfg.pipeline,
+                deadlines,
+            ))
+            .unwrap();
+            if r.rebuild_starved {
+                // Restarted by this frame, at least lag + starved_frames
+                // after the rebuild it replaced started.
+                assert_eq!(tracker.rebuild_started(), Some(r.frame));
+                assert!(r.frame >= before.unwrap() + workers.lag + workers.starved.unwrap());
+                flagged.push(r.frame);
+            }
+        }
+        release.send(()).unwrap();
+        // The first warm frame's rebuild (frame 1, due at 4) starved at 7.
+        assert_eq!(flagged.first(), Some(&7), "{flagged:?}");
+    }
+
     #[cfg(target_os = "linux")]
     #[test]
     fn only_rebuilds_no_frame_waits_for_run_at_the_lowest_priority() {
