@@ -316,11 +316,8 @@ pub fn cold_references(
     pipeline: &crate::pipeline::PipelineConfig,
     repeats: usize,
 ) -> Result<Vec<crate::membrane::Reconstruction>, crate::membrane::MembraneError> {
-    let budget = crate::membrane::Budget {
-        max_iterations: Some(crate::pipeline::cold_cap(membrane.config(), pipeline)),
-        deadline: None,
-        min_iterations: 0,
-    };
+    let budget =
+        crate::membrane::Budget::iterations(crate::pipeline::cold_cap(membrane.config(), pipeline));
     // As the pipeline takes its frames: without their flying pixels, capped.
     let (cloud, _) = crate::pipeline::frame_points(cloud, pipeline);
     (0..repeats as u64)

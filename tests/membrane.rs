@@ -548,9 +548,8 @@ fn iteration_budget_and_deadline_are_respected() {
 
     // A deadline already passed: no iteration, still a valid enclosing mesh.
     let past = Budget {
-        max_iterations: None,
         deadline: Some(Instant::now()),
-        min_iterations: 0,
+        ..Budget::default()
     };
     let rec = reconstruct(&cloud, &cfg, &past, None).unwrap();
     check_mesh(&rec.mesh);

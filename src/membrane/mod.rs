@@ -62,7 +62,7 @@ use crate::mesh::TriMesh;
 use crate::spline::{ClosedSurface, SplineError};
 use fit::FitCache;
 use serde::Serialize;
-use std::sync::Arc;
+use std::sync::{Arc, Weak};
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
@@ -98,7 +98,7 @@ pub enum MembraneError {
 }
 
 /// What the caller allows one reconstruction to spend.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct Budget {
     /// At most this many iterations (in addition to the config's cap).
     pub max_iterations: Option<usize>,
@@ -107,6 +107,11 @@ pub struct Budget {
     /// Run at least this many iterations even past the deadline (the
     /// iteration caps still apply). Default 0.
     pub min_iterations: usize,
+    /// Stop before the next iteration once every owner of the matching
+    /// [`Arc`] is gone: nobody wants the result any more
+    /// (a background rebuild its stream replaced, `pipeline::rebuild`).
+    /// `None`: always wanted.
+    pub wanted: Option<Weak<()>>,
 }
 
 impl Budget {
@@ -119,17 +124,15 @@ impl Budget {
     pub fn iterations(n: usize) -> Self {
         Self {
             max_iterations: Some(n),
-            deadline: None,
-            min_iterations: 0,
+            ..Self::default()
         }
     }
 
     /// A wall-clock budget of `d` from now.
     pub fn within(d: Duration) -> Self {
         Self {
-            max_iterations: None,
             deadline: Some(Instant::now() + d),
-            min_iterations: 0,
+            ..Self::default()
         }
     }
 }
@@ -157,6 +160,8 @@ pub enum StopReason {
     IterationBudget,
     /// The caller's deadline would have been passed by another iteration.
     Deadline,
+    /// The caller no longer wanted the result ([`Budget::wanted`]).
+    Cancelled,
 }
 
 impl std::fmt::Display for StopReason {
@@ -166,6 +171,7 @@ impl std::fmt::Display for StopReason {
             Self::MaxIterations => "max_iterations",
             Self::IterationBudget => "iteration_budget",
             Self::Deadline => "deadline",
+            Self::Cancelled => "cancelled",
         })
     }
 }

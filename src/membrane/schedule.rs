@@ -128,7 +128,8 @@ impl<'a> Schedule<'a> {
         grid == self.max_grid
     }
 
-    /// Why no further iteration may start, if so: an iteration cap, or a
+    /// Why no further iteration may start, if so: an iteration cap, a caller
+    /// that no longer wants the result, or a
     /// deadline that the next iteration (predicted from the last one,
     /// scaled to `samples`, its sample count) would pass.
     pub fn budget_stop(&self, samples: usize) -> Option<StopReason> {
@@ -138,6 +139,14 @@ impl<'a> Schedule<'a> {
         }
         if self.budget.max_iterations.is_some_and(|n| it >= n) {
             return Some(StopReason::IterationBudget);
+        }
+        if self
+            .budget
+            .wanted
+            .as_ref()
+            .is_some_and(|w| w.strong_count() == 0)
+        {
+            return Some(StopReason::Cancelled);
         }
         let dl = self
             .budget
@@ -266,5 +275,27 @@ mod tests {
         assert_eq!(largest_grid(&g, [48, 30], 10), [48, 30]);
         g.max_control_per_point = None;
         assert_eq!(largest_grid(&g, [8, 5], 1), [40, 25]);
+    }
+
+    #[test]
+    fn an_iteration_nobody_wants_does_not_start() {
+        let cfg = ScheduleConfig::default();
+        let owner = std::sync::Arc::new(());
+        let budget = Budget {
+            wanted: Some(std::sync::Arc::downgrade(&owner)),
+            ..Budget::default()
+        };
+        let schedule = Schedule::new(&cfg, &budget, 1.0, 0.1, [8, 5], 1000);
+        assert_eq!(schedule.budget_stop(100), None);
+        // Its owner gone, the next iteration is not started.
+        drop(owner);
+        assert_eq!(schedule.budget_stop(100), Some(StopReason::Cancelled));
+        // The iteration caps still come first.
+        let capped = Budget {
+            max_iterations: Some(0),
+            ..budget.clone()
+        };
+        let schedule = Schedule::new(&cfg, &capped, 1.0, 0.1, [8, 5], 1000);
+        assert_eq!(schedule.budget_stop(100), Some(StopReason::IterationBudget));
     }
 }

@@ -803,6 +803,7 @@ impl Tracker {
                 StartPath::Warm => cfg.warm_min_iterations.min(cap),
                 StartPath::Cold => 0,
             },
+            wanted: None,
         };
         let membrane_err = |source| PipelineError::Membrane {
             stream: self.key.to_string(),
@@ -842,9 +843,8 @@ impl Tracker {
                 if failed || drifted {
                     self.stats.fallbacks += 1;
                     let budget = Budget {
-                        max_iterations: Some(cold_cap(membranes.cold.config(), cfg)),
                         deadline: cold_deadline,
-                        min_iterations: 0,
+                        ..Budget::iterations(cold_cap(membranes.cold.config(), cfg))
                     };
                     let cold = membranes
                         .cold

@@ -79,13 +79,15 @@
 //! other prior (a turning bowl that first showed the camera its outside,
 //! a ball until its rim turned into view: last-third F 0.470 -> 0.552 over
 //! `benches/robot_view_eval.sh`; a turning torus +0.017, the swap -0.030,
-//! no other sequence changed). The stream's end cancels it too, and a
-//! cancelled rebuild that has not started never runs, so the workers'
-//! queue holds at most one rebuild per live stream.
+//! no other sequence changed). The stream's end cancels it too. A
+//! cancelled rebuild that has not started never runs, and one that has
+//! stops before its next iteration ([`Budget::wanted`]): it no longer
+//! holds a worker, at the lowest priority for seconds on a busy machine,
+//! that the stream's next rebuild waits for.
 
 use crate::cloud::{PointCloud, Vec3};
 use crate::membrane::view::FreeSpace;
-use crate::membrane::{Budget, ConfigError, Membrane, Start};
+use crate::membrane::{Budget, ConfigError, Membrane, Start, StopReason};
 use crate::model::ObjectModel;
 use crate::pipeline::align::Rigid;
 use crate::pipeline::Factor;
@@ -95,7 +97,7 @@ use crate::spline::Layout;
 use crossbeam_channel::{Receiver, TryRecvError};
 use serde::{Deserialize, Serialize};
 use std::num::NonZeroUsize;
-use std::sync::{Arc, Weak};
+use std::sync::Arc;
 
 /// `pipeline.rebuild` (see the module docs).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -246,7 +248,12 @@ impl Workers {
     ) -> Pending {
         let (tx, rx) = crossbeam_channel::bounded(1);
         let alive = Arc::new(());
-        let token = Arc::downgrade(&alive);
+        // Dropping every clone of the stream's Pending stops the membrane
+        // before its next iteration.
+        let budget = Budget {
+            wanted: Some(Arc::downgrade(&alive)),
+            ..budget
+        };
         let engines = Arc::clone(&self.engines);
         let pool = match urgency {
             Urgency::Idle => &self.idle,
@@ -255,7 +262,7 @@ impl Workers {
         };
         pool.spawn(move || {
             let (cold, warm) = &*engines;
-            if let Some(surface) = run(cold, warm, &model, max_points, &budget, &token) {
+            if let Some(surface) = run(cold, warm, &model, max_points, &budget) {
                 // The stream may be gone; then nobody wants the surface.
                 let _ = tx.send(surface);
             }
@@ -316,15 +323,18 @@ fn run(
     model: &ObjectModel,
     max_points: usize,
     budget: &Budget,
-    alive: &Weak<()>,
 ) -> Option<ClosedSurface> {
-    alive.upgrade()?;
+    let wanted = || budget.wanted.as_ref().is_none_or(|w| w.strong_count() > 0);
+    if !wanted() {
+        return None;
+    }
     let object = Rigid::identity();
     let points = PointCloud::from_points(model.points_in(&object));
     let points = points.thinned(max_points, 0);
     let carving = model.free_space(&object);
     let free: &dyn FreeSpace = &carving;
     match cold.reconstruct_seen(&points, budget, &Start::Cold, Some(free)) {
+        Ok(rec) if rec.report.stop == StopReason::Cancelled || !wanted() => None,
         Ok(rec) => {
             let [m, l] = rec.report.grid;
             if let Err(e) = warm.prefactor_warm(m, l) {
@@ -524,6 +534,27 @@ mod tests {
         assert!(matches!(busy.adopt(3, true), Adopt::Surface(_)));
         // The dropped rebuild's sender went without sending.
         assert!(rx.recv().is_err());
+    }
+
+    #[test]
+    fn a_dropped_rebuild_stops_before_its_next_iteration() {
+        let membranes = membranes();
+        let workers = membranes.rebuild.as_ref().unwrap();
+        let (cold, warm) = &*workers.engines;
+        let owner = Arc::new(());
+        let budget = Budget {
+            wanted: Some(Arc::downgrade(&owner)),
+            ..Budget::iterations(40)
+        };
+        let model = sphere_model();
+        assert!(run(cold, warm, &model, 2500, &budget).is_some());
+        drop(owner);
+        assert!(run(cold, warm, &model, 2500, &budget).is_none());
+        // The membrane itself stops before an iteration nobody wants.
+        let points = PointCloud::from_points(model.points_in(&Rigid::identity()));
+        let rec = cold.reconstruct(&points, &budget, &Start::Cold).unwrap();
+        assert_eq!(rec.report.stop, StopReason::Cancelled);
+        assert_eq!(rec.report.iterations, 0);
     }
 
     #[test]
