@@ -474,6 +474,11 @@ pub fn run(args: &BenchNodeArgs) -> Result<()> {
         }
         figures["steal_percent"] = serde_json::json!(steal);
         figures["model_bytes_max"] = serde_json::json!(seen.model_bytes_max);
+        let [ok, warn, error, stale] = seen.healthy_levels;
+        println!(
+            "/diagnostics statuses of the healthy streams' objects: OK {ok}, WARN {warn}, ERROR {error}, STALE {stale}"
+        );
+        figures["healthy_levels"] = serde_json::json!({"ok": ok, "warn": warn, "error": error, "stale": stale});
         if seen.model_bytes_max > 0 {
             println!(
                 "fused model: largest one object's {:.1} KiB (cap {:.1} KiB)",

@@ -256,6 +256,9 @@ pub struct DiagSeen {
     pub model_bytes_now: usize,
     /// The largest one object's fused model reported over the run.
     pub model_bytes_max: usize,
+    /// The statuses of the healthy streams' objects (every topic but the
+    /// hostile ones), counted by level: OK, WARN, ERROR, STALE.
+    pub healthy_levels: [u64; 4],
 }
 
 /// Watch the node's `/diagnostics`.
@@ -298,7 +301,13 @@ pub async fn watch_diagnostics(
                             .map(|kv| (kv.key.clone(), kv.value.clone()))
                             .collect();
                     } else if let Some(t) = st.values.iter().find(|kv| kv.key == "topic") {
-                        if t.value.starts_with("/bench/hostile/") {
+                        let hostile = t.value.starts_with("/bench/hostile/");
+                        if let (false, Some(n)) =
+                            (hostile, seen.healthy_levels.get_mut(usize::from(st.level)))
+                        {
+                            *n += 1;
+                        }
+                        if hostile {
                             let w = seen
                                 .worst
                                 .entry(t.value.clone())

@@ -44,6 +44,7 @@ pub mod engine;
 pub mod objects;
 pub mod outputs;
 pub mod rebuild;
+pub mod reserve;
 pub mod snap;
 
 pub use crate::stream::StreamKey;
@@ -612,6 +613,9 @@ pub struct Tracker {
     fused: Option<Fused>,
     /// The background rebuild in flight (`pipeline.rebuild`).
     rebuild: Option<rebuild::Pending>,
+    /// What the frames spent after their membrane, kept before the
+    /// membrane's deadline ([`reserve`]).
+    after_membrane: reserve::Reserve,
     stats: StreamStats,
 }
 
@@ -623,6 +627,7 @@ impl Tracker {
             previous: None,
             fused: None,
             rebuild: None,
+            after_membrane: reserve::Reserve::default(),
             stats: StreamStats::default(),
         }
     }
@@ -759,7 +764,7 @@ impl Tracker {
         let Deadlines {
             warm: deadline,
             cold: cold_deadline,
-        } = deadlines;
+        } = deadlines.earlier_by(self.after_membrane.get());
         let centroid = cloud.centroid().unwrap_or_else(Vec3::zeros);
         let size = cloud.aabb().longest_edge();
 
@@ -892,6 +897,7 @@ impl Tracker {
                 tracing::debug!(stream = %self.key, "warm fit not prepared: {e}");
             }
         }
+        let membrane_done = Instant::now();
         let eta_ref = match (final_path, self.previous.as_ref().filter(comparable)) {
             (StartPath::Warm, Some(prev)) => prev.eta_ref,
             _ => rec.report.eta_final,
@@ -941,6 +947,7 @@ impl Tracker {
             self.fused.is_some(),
             cfg.snap.as_ref(),
         );
+        self.after_membrane.record(membrane_done.elapsed());
         Ok(FrameResult {
             stream: self.key.clone(),
             frame,
@@ -1359,6 +1366,15 @@ impl Deadlines {
         Self::after(start, cfg.deadline_ms, cfg.cold_budget_ms())
     }
 
+    /// These deadlines `by` earlier (none stays none).
+    pub fn earlier_by(self, by: Duration) -> Self {
+        let earlier = |at: Option<Instant>| at.map(|t| t.checked_sub(by).unwrap_or(t));
+        Self {
+            warm: earlier(self.warm),
+            cold: earlier(self.cold),
+        }
+    }
+
     /// `warm_ms` and `cold_ms` after `start` (0: no deadline).
     pub fn after(start: Instant, warm_ms: f64, cold_ms: f64) -> Self {
         let at = |ms: f64| (ms > 0.0).then(|| start + Duration::from_secs_f64(ms / 1e3));
@@ -1554,6 +1570,17 @@ mod tests {
         };
         let whole = frame_points(&cloud, &uncapped).0;
         assert_eq!(whole.len(), cloud.len() - flying.dropped);
+    }
+
+    #[test]
+    fn deadlines_earlier_by_a_reserve_keep_none_as_none() {
+        let start = Instant::now() + Duration::from_secs(1);
+        let d = Deadlines::after(start, 15.0, 200.0);
+        let e = d.earlier_by(Duration::from_millis(3));
+        assert_eq!(e.warm, Some(start + Duration::from_millis(12)));
+        assert_eq!(e.cold, Some(start + Duration::from_millis(197)));
+        let none = Deadlines::default().earlier_by(Duration::from_millis(3));
+        assert_eq!(none, Deadlines::default());
     }
 
     #[test]
