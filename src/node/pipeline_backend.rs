@@ -452,22 +452,46 @@ mod tests {
         messages("/sphere/points", &[payload], &[]).remove(0)
     }
 
-    /// The `/diagnostics` messages of the frames `payloads` (encoded
-    /// PointCloud2) on `topic`, with the configuration changed by `sets`.
-    fn messages(topic: &str, payloads: &[Vec<u8>], sets: &[String]) -> Vec<Shown> {
+    /// A processor of `topic` with the configuration changed by `sets`.
+    fn processor(topic: &str, sets: &[String]) -> Box<dyn TopicProcessor> {
         let cfg = Config::load(None, sets).unwrap();
         let backend =
             PipelineBackend::new(&cfg.membrane, cfg.pipeline.clone(), cfg.wire.clone()).unwrap();
-        let mut processor = backend.processor(topic);
+        backend.processor(topic)
+    }
+
+    /// A node frame of `payload` on `topic`, due at `deadline`.
+    fn frame(topic: &str, payload: Vec<u8>, deadline: Instant) -> Frame {
+        Frame {
+            topic: topic.into(),
+            payload,
+            received_ns: 0,
+            source_ns: None,
+            sequence: None,
+            deadline,
+        }
+    }
+
+    /// The first `n` clouds on `topic` of the committed bag
+    /// `tests/data/bags/robot_view/{name}.mcap`.
+    fn robot_view_clouds(name: &str, topic: &str, n: usize) -> Vec<Vec<u8>> {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/bags/robot_view");
+        let path = std::path::Path::new(dir).join(format!("{name}.mcap"));
+        let bag = crate::bag::Bag::open(&path).unwrap();
+        let messages = bag.read(&[topic]).unwrap().into_iter();
+        messages.take(n).map(|m| m.data).collect()
+    }
+
+    /// The `/diagnostics` messages of the frames `payloads` (encoded
+    /// PointCloud2) on `topic`, with the configuration changed by `sets`.
+    fn messages(topic: &str, payloads: &[Vec<u8>], sets: &[String]) -> Vec<Shown> {
+        let mut processor = processor(topic, sets);
         let mut message = |payload: &Vec<u8>| {
-            let frame = Frame {
-                topic: topic.into(),
-                payload: payload.clone(),
-                received_ns: 0,
-                source_ns: None,
-                sequence: None,
-                deadline: Instant::now() + Duration::from_secs(10),
-            };
+            let frame = frame(
+                topic,
+                payload.clone(),
+                Instant::now() + Duration::from_secs(10),
+            );
             let result = processor.process(&frame, &mut |_| {});
             assert_eq!(result.error, None);
             (result.objects[0].message.clone(), result.counts)
@@ -489,28 +513,13 @@ mod tests {
 
     #[test]
     fn a_fitted_frame_its_deadline_stopped_is_ok() {
-        let path = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/tests/data/bags/robot_view/turn_capsule.mcap"
-        );
         let topic = "/synth/capsule/points";
-        let bag = crate::bag::Bag::open(std::path::Path::new(path)).unwrap();
-        let cfg = Config::load(None, &[]).unwrap();
-        let backend =
-            PipelineBackend::new(&cfg.membrane, cfg.pipeline.clone(), cfg.wire.clone()).unwrap();
-        let mut processor = backend.processor(topic);
+        let mut processor = processor(topic, &[]);
         let mut stopped = 0;
-        for m in bag.read(&[topic]).unwrap().into_iter().take(6) {
+        for payload in robot_view_clouds("turn_capsule", topic, 6) {
             // A deadline already passed: each warm frame runs its one
             // iteration (warm_min_iterations) and stops at the deadline.
-            let frame = Frame {
-                topic: topic.into(),
-                payload: m.data,
-                received_ns: 0,
-                source_ns: None,
-                sequence: None,
-                deadline: Instant::now(),
-            };
+            let frame = frame(topic, payload, Instant::now());
             let result = processor.process(&frame, &mut |_| {});
             let o = &result.objects[0];
             if o.message.contains("stop: deadline") {
@@ -527,16 +536,8 @@ mod tests {
         // The committed swap (a box, a bottle from frame 10, a mug from
         // frame 20) with the track never lost: no cold start restarts the
         // model, and the mug's view sees through the bottle's model.
-        let path = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/tests/data/bags/robot_view/swap.mcap"
-        );
         let topic = "/synth/rounded_box_then_bottle_then_mug/points";
-        let bag = crate::bag::Bag::open(std::path::Path::new(path)).unwrap();
-        let payloads: Vec<Vec<u8>> = (bag.read(&[topic]).unwrap().into_iter())
-            .take(23)
-            .map(|m| m.data)
-            .collect();
+        let payloads = robot_view_clouds("swap", topic, 23);
         let sets = ["pipeline.icp_min_inliers=null".to_owned()];
         let shown = messages(topic, &payloads, &sets);
         let named = |m: &Shown| m.0.contains("fused model, which restarted");
