@@ -135,6 +135,11 @@ impl Budget {
             ..Self::default()
         }
     }
+
+    /// Whether the caller still wants the result ([`Self::wanted`]).
+    pub fn is_wanted(&self) -> bool {
+        self.wanted.as_ref().is_none_or(|w| w.strong_count() > 0)
+    }
 }
 
 /// A previous surface to start from (the node's frame-to-frame warm start).

@@ -140,12 +140,7 @@ impl<'a> Schedule<'a> {
         if self.budget.max_iterations.is_some_and(|n| it >= n) {
             return Some(StopReason::IterationBudget);
         }
-        if self
-            .budget
-            .wanted
-            .as_ref()
-            .is_some_and(|w| w.strong_count() == 0)
-        {
+        if !self.budget.is_wanted() {
             return Some(StopReason::Cancelled);
         }
         let dl = self

@@ -271,11 +271,7 @@ impl TopicProcessor for EngineProcessor {
         // The node's deadline runs from receipt; every object of a labelled
         // cloud shares it, however many compute waves the objects take, and
         // the frame's outputs are made by it too.
-        let reserve = self.outputs_reserve.get();
-        let objects_by = frame
-            .deadline
-            .checked_sub(reserve)
-            .unwrap_or(frame.deadline);
+        let objects_by = self.outputs_reserve.before(frame.deadline);
         let deadlines = node_deadlines(&self.engine.pipeline, objects_by);
         let handled = self.engine.handle(
             &frame.topic,

@@ -764,7 +764,7 @@ impl Tracker {
         let Deadlines {
             warm: deadline,
             cold: cold_deadline,
-        } = deadlines.earlier_by(self.after_membrane.get());
+        } = deadlines.earlier_by(self.after_membrane);
         let centroid = cloud.centroid().unwrap_or_else(Vec3::zeros);
         let size = cloud.aabb().longest_edge();
 
@@ -1366,12 +1366,11 @@ impl Deadlines {
         Self::after(start, cfg.deadline_ms, cfg.cold_budget_ms())
     }
 
-    /// These deadlines `by` earlier (none stays none).
-    pub fn earlier_by(self, by: Duration) -> Self {
-        let earlier = |at: Option<Instant>| at.map(|t| t.checked_sub(by).unwrap_or(t));
+    /// These deadlines earlier by `reserve` (none stays none).
+    pub fn earlier_by(self, reserve: reserve::Reserve) -> Self {
         Self {
-            warm: earlier(self.warm),
-            cold: earlier(self.cold),
+            warm: self.warm.map(|t| reserve.before(t)),
+            cold: self.cold.map(|t| reserve.before(t)),
         }
     }
 
@@ -1576,10 +1575,12 @@ mod tests {
     fn deadlines_earlier_by_a_reserve_keep_none_as_none() {
         let start = Instant::now() + Duration::from_secs(1);
         let d = Deadlines::after(start, 15.0, 200.0);
-        let e = d.earlier_by(Duration::from_millis(3));
+        let mut reserve = reserve::Reserve::default();
+        reserve.record(Duration::from_millis(3));
+        let e = d.earlier_by(reserve);
         assert_eq!(e.warm, Some(start + Duration::from_millis(12)));
         assert_eq!(e.cold, Some(start + Duration::from_millis(197)));
-        let none = Deadlines::default().earlier_by(Duration::from_millis(3));
+        let none = Deadlines::default().earlier_by(reserve);
         assert_eq!(none, Deadlines::default());
     }
 

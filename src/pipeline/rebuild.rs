@@ -324,8 +324,7 @@ fn run(
     max_points: usize,
     budget: &Budget,
 ) -> Option<ClosedSurface> {
-    let wanted = || budget.wanted.as_ref().is_none_or(|w| w.strong_count() > 0);
-    if !wanted() {
+    if !budget.is_wanted() {
         return None;
     }
     let object = Rigid::identity();
@@ -334,7 +333,7 @@ fn run(
     let carving = model.free_space(&object);
     let free: &dyn FreeSpace = &carving;
     match cold.reconstruct_seen(&points, budget, &Start::Cold, Some(free)) {
-        Ok(rec) if rec.report.stop == StopReason::Cancelled || !wanted() => None,
+        Ok(rec) if rec.report.stop == StopReason::Cancelled || !budget.is_wanted() => None,
         Ok(rec) => {
             let [m, l] = rec.report.grid;
             if let Err(e) = warm.prefactor_warm(m, l) {

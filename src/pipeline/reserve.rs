@@ -13,7 +13,7 @@
 //! steps measures what followed it on the last frames ([`Reserve`]) and
 //! stops that much earlier.
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// Weight of the last measurement in the running mean of [`Reserve`].
 const WEIGHT: f64 = 0.25;
@@ -28,6 +28,12 @@ impl Reserve {
     /// The time to keep.
     pub fn get(self) -> Duration {
         self.0
+    }
+
+    /// `deadline` less the time to keep (`deadline` itself where the clock
+    /// cannot go that far back).
+    pub fn before(self, deadline: Instant) -> Instant {
+        deadline.checked_sub(self.0).unwrap_or(deadline)
     }
 
     /// Record that the work that followed the deadline's step took `took`.
