@@ -176,7 +176,10 @@ fn usable(cloud: &PointCloud, p: &PrepareConfig) -> Result<Usable, MembraneError
     let thinned = finite_len - idx.len();
     let mut points: Vec<Vec3> = idx.iter().map(|&i| cloud.points[i]).collect();
     let mut idx = idx;
-    let body = p.detached.as_ref().and_then(|d| detached::body(&points, d));
+    let body = p
+        .detached
+        .as_ref()
+        .and_then(|d| detached::body(&points, d, None));
     if let Some(body) = body {
         idx.retain(|&i| body.contains(&cloud.points[i]));
         points.retain(|q| body.contains(q));

@@ -96,7 +96,7 @@
 pub mod views;
 pub mod voxels;
 
-use crate::cloud::Vec3;
+use crate::cloud::{Aabb, Vec3};
 use crate::membrane::view::FreeSpace;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -421,6 +421,20 @@ impl ObjectModel {
                     .coords
             })
             .collect()
+    }
+
+    /// The box the fused points span in the sensor's frame of
+    /// `object_to_sensor` (empty for an empty model).
+    pub fn extent_in(&self, object_to_sensor: &Rigid) -> Aabb {
+        let mut extent = Aabb::empty();
+        for v in self.observed() {
+            extent.grow(
+                &object_to_sensor
+                    .transform_point(&v.position().into())
+                    .coords,
+            );
+        }
+        extent
     }
 
     /// True when some kept view saw `p` (object frame) empty.

@@ -759,7 +759,10 @@ impl Tracker {
         let cloud = &*cloud;
         let thin = thinned(cloud, cfg);
         let detached = membranes.cold.config().prepare.detached.as_ref();
-        let (raw, thin, detached) = without_detached(cloud, thin, detached, cfg);
+        // What the fused model already holds is the object (detached.rs).
+        let known = (self.fused.as_ref())
+            .and_then(|f| crate::detached::Known::new(f.model.extent_in(&f.pose)));
+        let (raw, thin, detached) = without_detached(cloud, thin, detached, known.as_ref(), cfg);
         let (raw, cloud) = (&*raw, &*thin);
         let Deadlines {
             warm: deadline,
@@ -1478,14 +1481,16 @@ pub fn without_flying<'a>(
 /// body ([`crate::detached`], with the membrane's `prepare.detached`),
 /// found on its `thin`ned points, and those thinned again (the cloud the
 /// frame tracks), so that tracking and the fused model see the object
-/// alone; and how many finite points of `raw` went.
+/// alone; and how many finite points of `raw` went. A group `known` holds
+/// (the fused model's box) stays.
 fn without_detached<'a>(
     raw: &'a PointCloud,
     thin: Cow<'a, PointCloud>,
     detached: Option<&crate::detached::DetachedConfig>,
+    known: Option<&crate::detached::Known>,
     cfg: &PipelineConfig,
 ) -> (Cow<'a, PointCloud>, Cow<'a, PointCloud>, usize) {
-    let Some(body) = detached.and_then(|d| crate::detached::body(&thin.points, d)) else {
+    let Some(body) = detached.and_then(|d| crate::detached::body(&thin.points, d, known)) else {
         return (Cow::Borrowed(raw), thin, 0);
     };
     let finite = |p: &&Vec3| p.iter().all(|c| c.is_finite());
