@@ -162,18 +162,51 @@ impl<T: Range> RangeImage<T> {
 
     /// Bin of `p` (`None` when behind the eye or beyond the image).
     pub fn cell(&self, p: &Vec3) -> Option<usize> {
-        let d = p - self.frame.eye;
-        let along = d.dot(&self.frame.dir);
-        if along <= 0.0 {
-            return None;
-        }
-        let x = ((d.dot(&self.frame.u) / along - self.lo[0]) * self.inv_bin).floor();
-        let y = ((d.dot(&self.frame.w) / along - self.lo[1]) * self.inv_bin).floor();
+        let [x, y] = self.bin_coords(p)?;
         if !(x >= 0.0 && y >= 0.0) {
             return None;
         }
         let (x, y) = (x as usize, y as usize);
         (x < self.dims[0] && y < self.dims[1]).then_some(y * self.dims[0] + x)
+    }
+
+    /// The bin coordinates of `p`, floored, whether in the image or not
+    /// (`None` behind the eye or not finite).
+    fn bin_coords(&self, p: &Vec3) -> Option<[f64; 2]> {
+        let d = p - self.frame.eye;
+        let along = d.dot(&self.frame.dir);
+        if along.is_nan() || along <= 0.0 {
+            return None;
+        }
+        let x = ((d.dot(&self.frame.u) / along - self.lo[0]) * self.inv_bin).floor();
+        let y = ((d.dot(&self.frame.w) / along - self.lo[1]) * self.inv_bin).floor();
+        (x.is_finite() && y.is_finite()).then_some([x, y])
+    }
+
+    /// The bin edge at range `r`, in metres across the view.
+    pub fn bin_width_at(&self, r: f64) -> f64 {
+        r / self.inv_bin
+    }
+
+    /// The nearest range seen over the bins within `reach` bins of `p`'s
+    /// (its `(2·reach + 1)²` block, clipped to the image): `None` behind
+    /// the eye or when the block lies wholly beyond the image;
+    /// [`Range::NONE`] where nothing was seen.
+    pub fn nearest_within(&self, p: &Vec3, reach: usize) -> Option<T> {
+        let [x, y] = self.bin_coords(p)?;
+        let span = |c: f64, dim: usize| {
+            let lo = (c - reach as f64).max(0.0);
+            let hi = (c + reach as f64).min(dim as f64 - 1.0);
+            (lo <= hi).then_some((lo as usize, hi as usize))
+        };
+        let ((x0, x1), (y0, y1)) = (span(x, self.dims[0])?, span(y, self.dims[1])?);
+        let mut best = T::NONE;
+        for yy in y0..=y1 {
+            for xx in x0..=x1 {
+                best = best.min_of(self.near[yy * self.dims[0] + xx]);
+            }
+        }
+        Some(best)
     }
 
     /// Record a range `r` seen in bin `c` (the nearest is kept).
@@ -201,6 +234,28 @@ impl<T: Range> RangeImage<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_wider_block_finds_what_lies_bins_away_even_beyond_the_image() {
+        let frame = ViewFrame::looking_at(Vec3::zeros(), Vec3::new(0.0, 0.0, 1.0)).unwrap();
+        let mut img: RangeImage<f64> = RangeImage::new(frame, [-0.5, -0.5], [0.5, 0.5], 0.1);
+        // At depth 1, `x` bins of 0.1 across the view.
+        let at = |x: f64| frame.u * (x + 0.05) + frame.dir;
+        let p = at(0.4);
+        img.record(img.cell(&p).unwrap(), 1.0);
+        // Three bins over: beyond a 3 × 3 block, within a 7 × 7 one.
+        let over = at(0.1);
+        assert_eq!(img.nearest_within(&over, 1), Some(f64::INFINITY));
+        assert_eq!(img.nearest_within(&over, 3), Some(1.0));
+        // Beyond the image's edge by two bins: the block still reaches it.
+        let outside = at(0.8);
+        assert_eq!(img.cell(&outside), None);
+        assert_eq!(img.nearest_within(&outside, 4), Some(1.0));
+        assert_eq!(img.nearest_within(&at(5.0), 4), None);
+        // Behind the eye.
+        assert_eq!(img.nearest_within(&Vec3::new(0.0, 0.0, -1.0), 4), None);
+        assert!((img.bin_width_at(2.0) - 0.2).abs() < 1e-12);
+    }
 
     #[test]
     fn a_point_is_binned_and_found_by_its_neighbours() {

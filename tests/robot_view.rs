@@ -606,28 +606,18 @@ fn last_third_seen(out: &str) -> f64 {
 #[test]
 fn a_rebuild_that_fits_the_frame_worse_than_the_warm_start_is_refused() {
     // `pipeline.rebuild.max_misfit`: late in the turn the bottle's warm
-    // chain has converged, and the cold membranes on its model fit the
-    // frame 2.0-2.4 times worse. Measured (3 -> the default 2): last-third
-    // F 0.926 -> 0.969, last-third seen side 0.888 -> 0.941 (frames 22-29:
-    // 0.79-0.91 -> 0.91-0.96), adopted rebuilds 9 -> 6. Measured, as here,
-    // with every voxel of the model counted (`pipeline.model.confirm`
-    // null): on the confirmed voxels the bottle's rebuilds fit within 2
-    // times, and both settings adopt the same 9 (F 0.947). And without
-    // the flying-pixel filter (`pipeline.flying` null): on this clean bag it
-    // drops 1-2 points in a few frames, which moves the warm chain (F 0.933
-    // at 2 against 0.917 at 3).
+    // chain has converged, and a cold membrane on its model can fit the
+    // frame worse. Measured when the default became 2 (3 -> 2, with
+    // `pipeline.model.confirm` and `pipeline.flying` null): last-third F
+    // 0.926 -> 0.969, seen side 0.888 -> 0.941, adopted rebuilds 9 -> 6.
+    // Since the revolved completion is judged a fused point's spacing
+    // beside the silhouettes (stop 63), the bottle's rebuilds fit within 2
+    // times there (both settings adopt 9, F 0.912). With the defaults one
+    // still fits worse: adopted 9 -> 8, last-third F 0.933 -> 0.937, seen
+    // side 0.930 -> 0.937.
     let name = "turn_bottle";
-    let every = [
-        "--set",
-        "pipeline.model.confirm=null",
-        "--set",
-        "pipeline.flying=null",
-    ];
-    let lenient = replay_with(
-        name,
-        &[&every[..], &["--set", "pipeline.rebuild.max_misfit=3.0"]].concat(),
-    );
-    let strict = replay_with(name, &every);
+    let lenient = replay_with(name, &["--set", "pipeline.rebuild.max_misfit=3.0"]);
+    let strict = replay_with(name, &[]);
     let adopted = |out: &str| out.matches(" rebuilt(").count();
     assert!(
         adopted(&strict) < adopted(&lenient),
@@ -636,10 +626,10 @@ fn a_rebuild_that_fits_the_frame_worse_than_the_warm_start_is_refused() {
         adopted(&lenient)
     );
     let ((f3, _, _), (f2, _, _)) = (closure(&lenient), closure(&strict));
-    assert!(f2 >= f3 + 0.02, "{name}: last-third F {f2} at 2, {f3} at 3");
+    assert!(f2 >= f3, "{name}: last-third F {f2} at 2, {f3} at 3");
     let (s3, s2) = (last_third_seen(&lenient), last_third_seen(&strict));
     assert!(
-        s2 >= s3 + 0.02,
+        s2 >= s3,
         "{name}: last-third seen side {s2} at 2, {s3} at 3"
     );
 }

@@ -25,8 +25,13 @@ pub(crate) struct Admission {
     /// Candidates within this distance of a fused point are dropped.
     pub gap: f64,
     /// Largest share of the candidates beyond the gap that some view saw
-    /// empty: more, and the views disagree with the completion.
+    /// empty by more than `tolerance`: more, and the views disagree with
+    /// the completion.
     pub max_contradicted: f64,
+    /// How far (m) beyond what a view saw a candidate must lie for the
+    /// view to contradict it: the fused points' spacing, the resolution
+    /// the completion is built at.
+    pub tolerance: f64,
     /// At most this many points are added.
     pub cap: f64,
 }
@@ -46,7 +51,7 @@ impl Admission {
         let added: Vec<Vec3> = candidates
             .filter(|q| index.nearest_one(q).0 > gap2)
             .filter(|q| {
-                let free = free.is_seen_free(q);
+                let free = free.is_seen_free_beyond(q, self.tolerance);
                 seen_free += usize::from(free);
                 !free
             })

@@ -201,6 +201,7 @@ pub fn complete(
     let admission = Admission {
         gap: cfg.gap_delta * delta,
         max_contradicted: cfg.max_contradicted,
+        tolerance: delta,
         cap: cfg.max_added * points.len() as f64,
     };
     // The lattice's size bounds the work before the admission counts it.

@@ -436,6 +436,13 @@ pub trait FreeSpace: Sync {
     /// True when some view saw `p` empty.
     fn is_seen_free(&self, p: &Vec3) -> bool;
 
+    /// True when some view saw `p` empty by more than `tol` (along its ray
+    /// and across it); [`Self::is_seen_free`] unless the views say more.
+    fn is_seen_free_beyond(&self, p: &Vec3, tol: f64) -> bool {
+        let _ = tol;
+        self.is_seen_free(p)
+    }
+
     /// The latest view's camera position, in the cloud's frame (`None`
     /// without a view).
     fn latest_eye(&self) -> Option<Vec3>;

@@ -499,6 +499,12 @@ impl FreeSpace for Carving<'_> {
         self.model.latest.as_ref().is_some_and(|v| v.is_free(&q)) || self.model.views.is_free(&q)
     }
 
+    fn is_seen_free_beyond(&self, p: &Vec3, tol: f64) -> bool {
+        let q = self.to_object.transform_point(&(*p).into()).coords;
+        let free = |v: &DepthView| v.is_free_beyond(&q, tol);
+        self.model.latest.as_ref().is_some_and(free) || self.model.views.views().iter().any(free)
+    }
+
     fn latest_eye(&self) -> Option<Vec3> {
         Some(self.eye_in_cloud(self.model.latest.as_ref()?.eye()))
     }

@@ -51,6 +51,10 @@ pub enum Evidence {
     OutsideSilhouette,
 }
 
+/// The most bins about a point's that [`DepthView::is_free_beyond`] looks
+/// at on each side.
+const MAX_REACH_BINS: usize = 4;
+
 /// Points whose k-NN distance samples the view's median spacing: the
 /// median of this many evenly spread d_i is within a few per cent of the
 /// median of all of them, at a fraction of the queries.
@@ -126,6 +130,34 @@ impl DepthView {
             self.evidence(p),
             Evidence::SeenThrough | Evidence::OutsideSilhouette
         )
+    }
+
+    /// True when this view saw `p` empty ([`Self::is_free`]), and when
+    /// it saw it beside the silhouette, by more than `tol` across the
+    /// view. A point of a fused model at its own resolution (voxel means,
+    /// a profile revolved from them) lies up to that far beyond the rim
+    /// the camera saw.
+    pub fn is_free_beyond(&self, p: &Vec3, tol: f64) -> bool {
+        match self.evidence(p) {
+            Evidence::SeenThrough => true,
+            Evidence::OutsideSilhouette => self.beside_by_more_than(p, tol),
+            Evidence::Surface | Evidence::Unknown => false,
+        }
+    }
+
+    /// True when nothing seen lies within `tol` of `p` across the view
+    /// (for a point in front of the eye, beside the silhouette).
+    fn beside_by_more_than(&self, p: &Vec3, tol: f64) -> bool {
+        let width = self.image.bin_width_at(self.image.frame().depth(p));
+        let bins = (tol / width).ceil();
+        let reach = if bins.is_finite() && bins > 0.0 {
+            1 + (bins as usize).min(MAX_REACH_BINS)
+        } else {
+            1
+        };
+        self.image
+            .nearest_within(p, reach)
+            .is_none_or(|seen| f64::from(seen).is_infinite())
     }
 
     /// What this view says of `p`.
@@ -256,6 +288,32 @@ mod tests {
         assert_ne!(view.evidence(&beside), Evidence::Surface);
         assert_eq!(view.evidence(&Vec3::new(0.0, 0.0, 6.0)), Evidence::Unknown);
         assert!(view.bytes() <= 4 * 256 * 256);
+    }
+
+    #[test]
+    fn beyond_a_tolerance_the_view_carves_only_what_lies_farther_off() {
+        let eye = Vec3::new(0.0, 0.0, 5.0);
+        let view = DepthView::new(&visible_cap(eye, 20_000), eye, 2.0, 256).unwrap();
+        let tol = 0.2;
+        // Beside the silhouette (the unit sphere's rim, seen from 5 m; bins
+        // about 5 cm across there): free at no tolerance, not within it,
+        // free again past it.
+        let rim = |off: f64| Vec3::new(1.0 + off, 0.0, 0.2);
+        assert!(view.is_free(&rim(0.15)));
+        assert!(!view.is_free_beyond(&rim(0.15), tol));
+        assert!(view.is_free_beyond(&rim(0.6), tol));
+        // In front of the seen surface (z = 1): seen through, as without.
+        let front = |z: f64| Vec3::new(0.0, 0.0, z);
+        assert!(view.is_free_beyond(&front(1.12), tol));
+        assert_eq!(
+            view.is_free(&front(1.02)),
+            view.is_free_beyond(&front(1.02), tol)
+        );
+        // Behind the surface, or behind the eye: never free.
+        assert!(!view.is_free_beyond(&front(-0.5), tol));
+        assert!(!view.is_free_beyond(&front(6.0), tol));
+        // Far beside the image: the camera saw past the object.
+        assert!(view.is_free_beyond(&Vec3::new(4.0, 0.0, 0.0), tol));
     }
 
     #[test]
