@@ -121,6 +121,38 @@ fn a_box_turning_edge_on_stays_tracked() {
     }
 }
 
+/// `sepmem replay -q` of `shape` under `motion`, `distance` m from the
+/// default camera (640x480, Kinect noise, no outliers, `--mesh-res 32`,
+/// `seed`): the summary, once it has met the first frame as its only cold
+/// one, and the last third's whole-object F.
+fn close_up(shape: &str, motion: &str, distance: &str, seed: &str) -> (String, f64) {
+    let tmp = tempfile::tempdir().unwrap();
+    let args = [
+        "--shapes",
+        shape,
+        "--motion",
+        motion,
+        "--distance",
+        distance,
+        "--mesh-res",
+        "32",
+        "--noise",
+        "kinect",
+        "--outliers",
+        "0",
+        "--seed",
+        seed,
+    ];
+    let bag = synth(tmp.path(), shape, &args);
+    let out = sepmem(&["replay", &bag, "-q"]);
+    eprintln!("{out}");
+    assert!(out.contains("30 frames ok (29 warm, 1 cold)"), "{out}");
+    let view = format!("view /synth/{shape}/points");
+    let view = out.lines().find(|l| l.starts_with(&view)).unwrap();
+    let last = figure(view, "last third (10): F ");
+    (out, last)
+}
+
 #[test]
 fn a_tube_that_hides_its_middle_close_up_keeps_its_far_arm() {
     // The camera orbits the bent tube at 0.5 m (6.7 k points a frame). End
@@ -130,38 +162,13 @@ fn a_tube_that_hides_its_middle_close_up_keeps_its_far_arm() {
     // size fell by 73 % and the frame restarted cold with a new model
     // (27 warm, 3 cold; last-third F 0.657).
     // The fused model's box holds the far arm, so it stays.
-    let tmp = tempfile::tempdir().unwrap();
-    let args = [
-        "--shapes",
-        "bent_tube",
-        "--motion",
-        "orbit",
-        "--distance",
-        "0.5",
-        "--mesh-res",
-        "32",
-        "--noise",
-        "kinect",
-        "--outliers",
-        "0",
-        "--seed",
-        "22",
-    ];
-    let bag = synth(tmp.path(), "tube_near", &args);
-    let out = sepmem(&["replay", &bag, "-q"]);
-    eprintln!("{out}");
-    assert!(out.contains("30 frames ok (29 warm, 1 cold)"), "{out}");
+    let (out, last) = close_up("bent_tube", "orbit", "0.5", "22");
     assert!(
         !out.contains("detached:"),
         "points dropped as detached: {out}"
     );
-    let view = out
-        .lines()
-        .find(|l| l.starts_with("view /synth/bent_tube/points"))
-        .unwrap();
     // Measured 0.974 (0.657 when the far arm went).
-    let last = figure(view, "last third (10): F ");
-    assert!(last >= 0.9, "last-third F {last}: {view}");
+    assert!(last >= 0.9, "last-third F {last}: {out}");
 }
 
 #[test]
@@ -173,33 +180,8 @@ fn a_can_close_up_is_completed_as_a_solid_of_revolution() {
     // never completed (last-third F 0.662). Judged a fused point's
     // spacing beside the silhouette (src/model/views.rs, is_free_beyond),
     // it is: measured 0.962.
-    let tmp = tempfile::tempdir().unwrap();
-    let args = [
-        "--shapes",
-        "can",
-        "--motion",
-        "turn",
-        "--distance",
-        "0.55",
-        "--mesh-res",
-        "32",
-        "--noise",
-        "kinect",
-        "--outliers",
-        "0",
-        "--seed",
-        "41",
-    ];
-    let bag = synth(tmp.path(), "can_near", &args);
-    let out = sepmem(&["replay", &bag, "-q"]);
-    eprintln!("{out}");
-    assert!(out.contains("30 frames ok (29 warm, 1 cold)"), "{out}");
-    let view = out
-        .lines()
-        .find(|l| l.starts_with("view /synth/can/points"))
-        .unwrap();
-    let last = figure(view, "last third (10): F ");
-    assert!(last >= 0.9, "last-third F {last}: {view}");
+    let (out, last) = close_up("can", "turn", "0.55", "41");
+    assert!(last >= 0.9, "last-third F {last}: {out}");
 }
 
 /// The whole-object F of the first and last thirds of `bag`'s one stream,
