@@ -81,23 +81,14 @@ impl Known {
     /// The known box of an object whose model spans `extent`; `None` for
     /// an empty or non-finite box (an empty model knows nothing).
     pub fn new(extent: Aabb) -> Option<Self> {
-        let grow = KNOWN_MARGIN * (extent.max - extent.min).norm();
-        let finite = extent
-            .min
-            .iter()
-            .chain(extent.max.iter())
-            .all(|c| c.is_finite());
-        (finite && grow.is_finite()).then(|| {
-            Self(Aabb {
-                min: extent.min.add_scalar(-grow),
-                max: extent.max.add_scalar(grow),
-            })
-        })
+        let diagonal = extent.diagonal();
+        (!extent.is_empty() && diagonal.is_finite())
+            .then(|| Self(extent.inflated(KNOWN_MARGIN * diagonal)))
     }
 
     /// True when the box from `lo` to `hi` lies within the known box.
     fn holds(&self, lo: &Vec3, hi: &Vec3) -> bool {
-        (0..3).all(|k| lo[k] >= self.0.min[k] && hi[k] <= self.0.max[k])
+        self.0.contains(lo) && self.0.contains(hi)
     }
 }
 

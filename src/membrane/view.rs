@@ -436,10 +436,10 @@ pub trait FreeSpace: Sync {
     /// True when some view saw `p` empty.
     fn is_seen_free(&self, p: &Vec3) -> bool;
 
-    /// True when some view saw `p` empty by more than `tol` (along its ray
-    /// and across it); [`Self::is_seen_free`] unless the views say more.
-    fn is_seen_free_beyond(&self, p: &Vec3, tol: f64) -> bool {
-        let _ = tol;
+    /// [`Self::is_seen_free`], but a point beside a view's silhouette only
+    /// when it lies more than `tol` beyond it; [`Self::is_seen_free`]
+    /// where the views say no more.
+    fn is_seen_free_beyond(&self, p: &Vec3, _tol: f64) -> bool {
         self.is_seen_free(p)
     }
 

@@ -495,14 +495,11 @@ pub struct Carving<'a> {
 
 impl FreeSpace for Carving<'_> {
     fn is_seen_free(&self, p: &Vec3) -> bool {
-        let q = self.to_object.transform_point(&(*p).into()).coords;
-        self.model.latest.as_ref().is_some_and(|v| v.is_free(&q)) || self.model.views.is_free(&q)
+        self.any_view(p, |v, q| v.is_free(q))
     }
 
     fn is_seen_free_beyond(&self, p: &Vec3, tol: f64) -> bool {
-        let q = self.to_object.transform_point(&(*p).into()).coords;
-        let free = |v: &DepthView| v.is_free_beyond(&q, tol);
-        self.model.latest.as_ref().is_some_and(free) || self.model.views.views().iter().any(free)
+        self.any_view(p, |v, q| v.is_free_beyond(q, tol))
     }
 
     fn latest_eye(&self) -> Option<Vec3> {
@@ -531,6 +528,14 @@ impl FreeSpace for Carving<'_> {
 }
 
 impl Carving<'_> {
+    /// Whether `says` holds for the latest view or a kept one, of `p`
+    /// brought into the object's frame.
+    fn any_view(&self, p: &Vec3, says: impl Fn(&DepthView, &Vec3) -> bool) -> bool {
+        let q = self.to_object.transform_point(&(*p).into()).coords;
+        let views = self.model.latest.iter().chain(self.model.views.views());
+        views.into_iter().any(|v| says(v, &q))
+    }
+
     /// A camera position of the model's views, in the cloud's frame.
     fn eye_in_cloud(&self, eye: Vec3) -> Vec3 {
         self.to_object.inverse_transform_point(&eye.into()).coords
