@@ -15,12 +15,12 @@
 
 use std::time::{Duration, Instant};
 
-/// Weight of the last measurement in the running mean of [`Reserve`].
+/// How far [`Reserve`] moves towards a lower measurement at each.
 const WEIGHT: f64 = 0.25;
 
 /// The time kept before a deadline for what follows: the larger of the last
-/// measurement and a running mean of the measurements, so it rises at once
-/// with a slower frame and falls back over a few frames.
+/// measurement and the reserve moved a quarter of the way towards it, so it
+/// rises at once with a slower frame and falls back over a few frames.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Reserve(Duration);
 
