@@ -336,6 +336,14 @@ mod tests {
                 "pipeline.model_icp.normal_k: ",
             ),
             ("pipeline.model_icp.steps=0", "pipeline.model_icp.steps: "),
+            (
+                "pipeline.model_icp.refine.max_points=0",
+                "pipeline.model_icp.refine.max_points: ",
+            ),
+            (
+                "pipeline.model_icp.keep_normals=0",
+                "pipeline.model_icp.keep_normals: ",
+            ),
             ("membrane.fit.alpha=\"x\"", "membrane.fit.alpha: "),
         ] {
             let err = Config::load(None, &[set.into()]).unwrap_err();

@@ -112,17 +112,109 @@ pub fn estimate_normals_where(
     k: usize,
     wanted: &[bool],
 ) -> Result<Vec<Vec3>, NormalsError> {
-    let points = index.points();
-    check(points, k)?;
-    let qty = k.min(points.len());
-    Ok(points
-        .par_iter()
-        .enumerate()
-        .map(|(i, q)| match wanted.get(i) {
-            Some(true) => normal_at(index, q, qty),
-            _ => Vec3::zeros(),
+    let mut normals = NormalsOnDemand::new(index, k)?;
+    normals.cover(wanted);
+    Ok(normals.normals)
+}
+
+/// The normals of an index's points, each estimated the first time it is
+/// asked for and then kept (the zero vector until then): a registration
+/// in passes on the same points (a coarse one, then a finer one on more of
+/// a frame's points, `pipeline.model_icp.refine`) estimates each point's
+/// normal once. A `prior` may know some normals already (those kept from
+/// earlier frames, `pipeline.model_icp.keep_normals`); those are taken
+/// as they are.
+pub struct NormalsOnDemand<'a> {
+    index: &'a KnnIndex,
+    qty: usize,
+    normals: Vec<Vec3>,
+    known: Vec<bool>,
+    prior: Option<&'a dyn Fn(usize) -> Option<Vec3>>,
+    estimated: Vec<usize>,
+}
+
+impl<'a> NormalsOnDemand<'a> {
+    /// No normal yet of the points of `index`, each to come from its `k`
+    /// nearest points.
+    ///
+    /// # Errors
+    /// As [`estimate_normals`].
+    pub fn new(index: &'a KnnIndex, k: usize) -> Result<Self, NormalsError> {
+        let points = index.points();
+        check(points, k)?;
+        Ok(Self {
+            index,
+            qty: k.min(points.len()),
+            normals: vec![Vec3::zeros(); points.len()],
+            known: vec![false; points.len()],
+            prior: None,
+            estimated: Vec::new(),
         })
-        .collect())
+    }
+
+    /// Take point `i`'s normal from `prior(i)` where it gives one.
+    pub fn with_prior(self, prior: &'a dyn Fn(usize) -> Option<Vec3>) -> Self {
+        Self {
+            prior: Some(prior),
+            ..self
+        }
+    }
+
+    /// The indexed points.
+    pub fn index(&self) -> &'a KnnIndex {
+        self.index
+    }
+
+    /// Give a normal to the points whose entry in `wanted` is true and
+    /// that have none yet: the prior's, or one estimated (in parallel).
+    pub fn cover(&mut self, wanted: &[bool]) {
+        let wanted = wanted.iter().enumerate().filter(|(_, w)| **w);
+        self.cover_points(wanted.map(|(i, _)| i));
+    }
+
+    /// [`Self::cover`] of the points `indices` (out-of-range ones left out).
+    pub fn cover_points(&mut self, indices: impl IntoIterator<Item = usize>) {
+        let mut todo = Vec::new();
+        for i in indices {
+            if self.known.get(i) != Some(&false) {
+                continue;
+            }
+            self.known[i] = true;
+            match self.prior.and_then(|p| p(i)) {
+                Some(n) => self.normals[i] = n,
+                None => todo.push(i),
+            }
+        }
+        let (index, qty) = (self.index, self.qty);
+        let found: Vec<Vec3> = todo
+            .par_iter()
+            .map(|&i| normal_at(index, &index.points()[i], qty))
+            .collect();
+        for (&i, n) in todo.iter().zip(found) {
+            self.normals[i] = n;
+        }
+        self.estimated.extend(todo);
+    }
+
+    /// Every point's normal: the zero vector where none was asked for.
+    pub fn normals(&self) -> &[Vec3] {
+        &self.normals
+    }
+
+    /// The points whose normal was estimated (not the prior's), with it.
+    pub fn estimated(&self) -> impl Iterator<Item = (usize, Vec3)> + '_ {
+        self.estimated.iter().map(|&i| (i, self.normals[i]))
+    }
+}
+
+impl std::fmt::Debug for NormalsOnDemand<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("NormalsOnDemand")
+            .field("points", &self.known.len())
+            .field("known", &self.known.iter().filter(|k| **k).count())
+            .field("estimated", &self.estimated.len())
+            .finish()
+    }
 }
 
 /// The unit normal at `q` from its `qty` nearest points of `index`.
@@ -214,6 +306,39 @@ mod tests {
             NeighbourCount::try_from(2),
             Err("2 neighbours cannot give a normal (at least 3)".to_string())
         );
+    }
+
+    #[test]
+    fn normals_on_demand_are_estimated_once_and_kept() {
+        let index = KnnIndex::new(crate::shapes::fibonacci_sphere(500));
+        let all = estimate_normals_from(&index, 10).unwrap();
+        let mut lazy = NormalsOnDemand::new(&index, 10).unwrap();
+        let first: Vec<bool> = (0..500).map(|i| i % 3 == 0).collect();
+        let second: Vec<bool> = (0..500).map(|i| i % 2 == 0).collect();
+        lazy.cover(&first);
+        let after_first = lazy.normals().to_vec();
+        lazy.cover(&second);
+        for (i, (n, m)) in lazy.normals().iter().zip(&all).enumerate() {
+            if first[i] || second[i] {
+                assert_eq!(n, m, "point {i}");
+            } else {
+                assert_eq!(*n, Vec3::zeros(), "point {i}");
+            }
+            if first[i] {
+                assert_eq!(*n, after_first[i], "point {i} changed");
+            }
+        }
+        // Each estimated once: a third and the half not in it.
+        let once = (0..500).filter(|i| first[*i] || second[*i]).count();
+        assert_eq!(lazy.estimated().count(), once);
+        // A prior's normals are taken as they are, the others estimated.
+        let prior = |i: usize| (i % 5 == 0).then_some(Vec3::x());
+        let mut lazy = NormalsOnDemand::new(&index, 10).unwrap().with_prior(&prior);
+        lazy.cover(&vec![true; 500]);
+        for (i, (n, m)) in lazy.normals().iter().zip(&all).enumerate() {
+            assert_eq!(*n, if i % 5 == 0 { Vec3::x() } else { *m }, "point {i}");
+        }
+        assert_eq!(lazy.estimated().count(), 400);
     }
 
     #[test]

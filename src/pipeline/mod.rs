@@ -41,6 +41,7 @@
 pub mod align;
 pub mod collision;
 pub mod engine;
+mod kept_normals;
 pub mod objects;
 pub mod outputs;
 pub mod rebuild;
@@ -56,6 +57,7 @@ use crate::membrane::{
     WarmStart,
 };
 use crate::mesh::TriMesh;
+use crate::normals::NormalsOnDemand;
 use crate::spatial::KnnIndex;
 use crate::spline::ClosedSurface;
 use serde::{Deserialize, Serialize};
@@ -252,6 +254,11 @@ pub struct ModelIcpConfig {
     pub max_points: NonZeroUsize,
     /// Neighbours of a model point that give its normal.
     pub normal_k: crate::normals::NeighbourCount,
+    /// A second, finer registration from the first one's motion.
+    pub refine: Option<RefineConfig>,
+    /// Frames a model point's estimated normal is kept for (in the object's
+    /// frame, [`kept_normals`]); `None`: estimated again every frame.
+    pub keep_normals: Option<std::num::NonZeroU32>,
 }
 
 impl Default for ModelIcpConfig {
@@ -262,6 +269,29 @@ impl Default for ModelIcpConfig {
             trim: Share(0.03),
             max_points: NonZeroUsize::MIN.saturating_add(499),
             normal_k: crate::normals::NeighbourCount::default(),
+            refine: Some(RefineConfig::default()),
+            keep_normals: std::num::NonZeroU32::new(4),
+        }
+    }
+}
+
+/// `pipeline.model_icp.refine`: point-to-plane steps on more of the
+/// frame's points, from the motion the coarse steps found.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RefineConfig {
+    /// Point-to-plane steps.
+    pub steps: NonZeroUsize,
+    /// At most this many of the frame's points are matched per step.
+    pub max_points: NonZeroUsize,
+}
+
+impl Default for RefineConfig {
+    fn default() -> Self {
+        Self {
+            // 3 steps on at most 1 000 points.
+            steps: NonZeroUsize::MIN.saturating_add(2),
+            max_points: NonZeroUsize::MIN.saturating_add(999),
         }
     }
 }
@@ -603,6 +633,8 @@ struct Fused {
     model: crate::model::ObjectModel,
     /// Object frame → this frame's cloud frame.
     pose: align::Rigid,
+    /// The model's normals kept for its registration.
+    normals: kept_normals::KeptNormals,
 }
 
 /// Per-stream state: the previous surface for warm starts, and counts.
@@ -992,7 +1024,11 @@ impl Tracker {
         let reset = match (motion, self.fused.as_mut()) {
             (Some(m), Some(f)) => {
                 f.pose = m * f.pose;
-                f.model.integrate(&raw.points, &f.pose).reset
+                let reset = f.model.integrate(&raw.points, &f.pose).reset;
+                if reset {
+                    f.normals = kept_normals::KeptNormals::default();
+                }
+                reset
             }
             _ => {
                 self.restart_fused(raw, size, cfg);
@@ -1111,11 +1147,16 @@ impl Tracker {
         let pose = align::Rigid::identity();
         let mut model = crate::model::ObjectModel::new(mc.clone(), size);
         model.integrate(&raw.points, &pose);
-        self.fused = Some(Fused { model, pose });
+        let normals = kept_normals::KeptNormals::default();
+        self.fused = Some(Fused {
+            model,
+            pose,
+            normals,
+        });
     }
 
     fn choose_path(
-        &self,
+        &mut self,
         cloud: &PointCloud,
         centroid: Vec3,
         size: f64,
@@ -1151,8 +1192,8 @@ impl Tracker {
             .filter(|_| lost || cfg.model_icp.is_some())
             .map(|f| KnnIndex::new(f.model.points_in(&f.pose)));
         let motion = alignment.map_or(shift, |a| a.motion);
-        let motion = match (&fused, &cfg.model_icp) {
-            (Some(index), Some(mi)) => on_model(index, cloud, motion, mi, scale),
+        let motion = match (&fused, &cfg.model_icp, self.fused.as_mut()) {
+            (Some(index), Some(mi), Some(f)) => on_model(index, f, cloud, motion, mi, scale),
             _ => motion,
         };
         let reason = if lost {
@@ -1277,9 +1318,12 @@ fn refit_or_lost(
     }
 }
 
-/// `motion` refined against the fused model's points `index`
-/// (`pipeline.model_icp`); kept as it is when fewer than
-/// [`MIN_MODEL_MATCHES`] of the frame's sampled points match the model.
+/// `motion` refined against the fused model's points `index` (in the
+/// previous frame's cloud frame, `fused`'s pose) by `pipeline.model_icp`:
+/// its steps, then its `refine` pass from their motion, each kept only
+/// when at least [`MIN_MODEL_MATCHES`] of the frame's sampled points match
+/// the model. The normals the steps estimate are kept in `fused`
+/// ([`kept_normals`]), and those it kept are taken.
 ///
 /// A turning mug whose handle is hidden is a cylinder to this step, and
 /// its pose drifts about the axis (t_turn_mug: 75° by the last third) until
@@ -1291,22 +1335,37 @@ fn refit_or_lost(
 /// whenever it was 3 % lower drifted further (110°).
 fn on_model(
     index: &KnnIndex,
+    fused: &mut Fused,
     cloud: &PointCloud,
     motion: align::Rigid,
     cfg: &ModelIcpConfig,
     scale: f64,
 ) -> align::Rigid {
-    let a = align::align_to_points(
-        index,
-        &cloud.points,
-        motion,
-        cfg.steps.get(),
-        cfg.trim.get() * scale,
-        cfg.max_points.get(),
-        cfg.normal_k.get(),
-    );
-    a.filter(|a| a.inlier_fraction >= MIN_MODEL_MATCHES)
-        .map_or(motion, |a| a.motion)
+    let (pose, kept) = (&fused.pose, &mut fused.normals);
+    let keep = cfg.keep_normals.map_or(0, |k| k.get());
+    kept.next_frame(fused.model.voxel_edge(), keep);
+    let prior = |i: usize| kept.get(pose, &index.points()[i]);
+    let Ok(model) = NormalsOnDemand::new(index, cfg.normal_k.get()) else {
+        return motion;
+    };
+    let mut model = model.with_prior(&prior);
+    let (points, trim) = (&cloud.points, cfg.trim.get() * scale);
+    let mut run = |from, steps: NonZeroUsize, max: NonZeroUsize| {
+        let a = align::align_to_points(&mut model, points, from, steps.get(), trim, max.get());
+        (a.inlier_fraction >= MIN_MODEL_MATCHES).then_some(a.motion)
+    };
+    let coarse = run(motion, cfg.steps, cfg.max_points);
+    let refined = coarse.map(|c| {
+        cfg.refine
+            .as_ref()
+            .and_then(|r| run(c, r.steps, r.max_points))
+            .unwrap_or(c)
+    });
+    let estimated: Vec<(usize, Vec3)> = model.estimated().collect();
+    for (i, n) in estimated {
+        kept.put(pose, &index.points()[i], &n);
+    }
+    refined.unwrap_or(motion)
 }
 
 /// Least share of a frame's sampled points matched to the fused model for
