@@ -23,7 +23,25 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use rstar::primitives::GeomWithData;
 use rstar::RTree;
+use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, DefaultHasher};
 use std::num::NonZero;
+
+/// A hash map with fixed keys (SipHash with zero keys), for maps keyed by
+/// grid cell whose iteration order reaches an output. The fused model's
+/// points come out in its voxel map's order and the membrane's thinning
+/// keeps points by index; with std's per-process random keys the same bag
+/// gave a differently ordered fused cloud in every run, so replays with
+/// `pipeline.model` were not repeatable and the node's model output
+/// differed from `replay`'s.
+pub type FixedMap<K, V> = HashMap<K, V, BuildHasherDefault<DefaultHasher>>;
+
+/// The integer coordinates of the cell of edge `edge` (cells aligned with
+/// the origin) holding `p`.
+pub fn cell_key(p: &Vec3, edge: f64) -> [i32; 3] {
+    let q = p / edge;
+    [q.x.floor() as i32, q.y.floor() as i32, q.z.floor() as i32]
+}
 
 /// The offsets of the 26 cells around a cell of a regular 3D grid (its
 /// 26-neighbourhood), for grids keyed by integer cell coordinates.

@@ -35,16 +35,7 @@
 //! ellipsoid turned 360° −0.25); `min_hits` alone, 0.756.
 
 use crate::cloud::Vec3;
-use crate::spatial::CELL_NEIGHBOURS;
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, DefaultHasher};
-
-/// A hash map with fixed keys (SipHash with zero keys). The fused points
-/// come out in the map's order, and the membrane's thinning keeps points by
-/// index; with std's per-process random keys the same bag gave a differently
-/// ordered fused cloud in every run, so replays with `pipeline.model` were
-/// not repeatable and the node's model output differed from `replay`'s.
-type FixedMap<K, V> = HashMap<K, V, BuildHasherDefault<DefaultHasher>>;
+use crate::spatial::{cell_key, FixedMap, CELL_NEIGHBOURS};
 
 /// Integer voxel coordinates.
 pub type VoxelKey = [i32; 3];
@@ -99,8 +90,7 @@ impl VoxelMemory {
 
     /// The key of the voxel holding `p`.
     pub fn key(&self, p: &Vec3) -> VoxelKey {
-        let q = p / self.size;
-        [q.x.floor() as i32, q.y.floor() as i32, q.z.floor() as i32]
+        cell_key(p, self.size)
     }
 
     /// Add the points of frame `frame` (object frame): per voxel, the mean of

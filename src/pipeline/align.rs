@@ -133,16 +133,14 @@ fn align_with(
         matches.clear();
         let mut sum2 = 0.0;
         let mut sampled = 0usize;
-        for q in data.iter().step_by(stride) {
+        for (q, ql, d2, vertex) in nearest_of_sampled(index, data, &inv, stride) {
             sampled += 1;
-            let ql = inv.transform_point(&(*q).into()).coords;
-            let (d2, vertex) = index.nearest_one(&ql);
             if d2 <= trim2 {
                 sum2 += d2;
                 matches.push(Match {
                     vertex,
                     local: ql,
-                    data: *q,
+                    data: q,
                 });
             }
         }
@@ -270,6 +268,22 @@ pub fn plane_inlier_share(
     explained as f64 / matches.len().max(1) as f64
 }
 
+/// Every `stride`-th point of `data` with, brought back by `inv`, its
+/// position in the model's frame, the squared distance to its nearest point
+/// of `index` and that point's index.
+fn nearest_of_sampled<'a>(
+    index: &'a KnnIndex,
+    data: &'a [Vec3],
+    inv: &'a Rigid,
+    stride: usize,
+) -> impl Iterator<Item = (Vec3, Vec3, f64, usize)> + 'a {
+    data.iter().step_by(stride).map(move |q| {
+        let local = inv.transform_point(&(*q).into()).coords;
+        let (d2, vertex) = index.nearest_one(&local);
+        (*q, local, d2, vertex)
+    })
+}
+
 /// The sampled points of `data` (at most `max_points`, evenly strided)
 /// brought back by `motion`'s inverse, each with its nearest point of the
 /// model `normals` indexes when that lies within `reach`; the matched
@@ -284,16 +298,10 @@ fn matched(
     let (index, inv) = (normals.index(), motion.inverse());
     let stride = (data.len() / max_points.max(1)).max(1);
     let mut wanted = vec![false; index.len()];
-    let matches = data
-        .iter()
-        .step_by(stride)
-        .map(|q| {
-            let local = inv.transform_point(&(*q).into()).coords;
-            let (d2, vertex) = index.nearest_one(&local);
+    let matches = nearest_of_sampled(index, data, &inv, stride)
+        .map(|(_, local, d2, vertex)| {
             let near = d2 <= reach * reach;
-            if near {
-                wanted[vertex] = true;
-            }
+            wanted[vertex] |= near;
             near.then_some((vertex, local))
         })
         .collect();

@@ -15,11 +15,7 @@
 
 use super::align::Rigid;
 use crate::cloud::Vec3;
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, DefaultHasher};
-
-/// A map with a fixed hasher: the same keys iterate alike in every run.
-type FixedMap<K, V> = HashMap<K, V, BuildHasherDefault<DefaultHasher>>;
+use crate::spatial::{cell_key, FixedMap};
 
 /// Normals of the fused model's voxels, in the object's frame, each with
 /// the frame it was estimated in.
@@ -29,7 +25,7 @@ pub(super) struct KeptNormals {
     edge: f64,
     /// Frames counted since the first.
     frame: u32,
-    kept: FixedMap<[i64; 3], (Vec3, u32)>,
+    kept: FixedMap<[i32; 3], (Vec3, u32)>,
 }
 
 impl KeptNormals {
@@ -48,9 +44,8 @@ impl KeptNormals {
     }
 
     /// The cell of the object-frame point `p`.
-    fn key(&self, p: &Vec3) -> [i64; 3] {
-        let q = p / self.edge;
-        [q.x.floor() as i64, q.y.floor() as i64, q.z.floor() as i64]
+    fn key(&self, p: &Vec3) -> [i32; 3] {
+        cell_key(p, self.edge)
     }
 
     /// The kept normal of the voxel holding `p`, both in the cloud frame
