@@ -299,7 +299,8 @@ mod tests {
     }
 }
 
-/// The cold references of a frame: `repeats` cold starts of `cloud` (no
+/// The cold references of a frame: `repeats` cold starts of `cloud` with
+/// the pipeline's cold membrane, taken as the pipeline takes a frame (no
 /// deadline, the cold iteration cap), each on another thinning subset
 /// ([`crate::pipeline::thinned_subset`]; the first is the pipeline's own). With more
 /// than one, their spread measures how reproducible a cold start of the
@@ -312,14 +313,19 @@ mod tests {
 /// The first failing reconstruction's [`crate::membrane::MembraneError`].
 pub fn cold_references(
     cloud: &crate::cloud::PointCloud,
-    membrane: &crate::membrane::Membrane,
+    membranes: &crate::pipeline::Membranes,
     pipeline: &crate::pipeline::PipelineConfig,
     repeats: usize,
 ) -> Result<Vec<crate::membrane::Reconstruction>, crate::membrane::MembraneError> {
+    let membrane = &membranes.cold;
     let budget =
         crate::membrane::Budget::iterations(crate::pipeline::cold_cap(membrane.config(), pipeline));
-    // As the pipeline takes its frames: without their flying pixels, capped.
+    // As the pipeline takes its frames: without their flying pixels and
+    // detached groups, capped.
     let (cloud, _) = crate::pipeline::frame_points(cloud, pipeline);
+    let thin = crate::pipeline::thinned(&cloud, pipeline);
+    let detached = membranes.detached.as_ref();
+    let (cloud, _, _) = crate::pipeline::without_detached(&cloud, thin, detached, None, pipeline);
     (0..repeats as u64)
         .map(|k| {
             let thinned = crate::pipeline::thinned_subset(&cloud, pipeline, k);
@@ -411,21 +417,16 @@ pub fn replay_scored(
                 .as_ref()
                 .map(|gt| score_frame(&result.reconstruction.mesh, gt, &s.cloud.points, &sc))
                 .transpose()?;
-            let cold = cold_references(
-                &s.cloud,
-                &engine.membranes.cold,
-                &cfg.pipeline,
-                cold_repeats,
-            )?
-            .iter()
-            .map(|rec| {
-                let cs = gt
-                    .as_ref()
-                    .map(|gt| score_frame(&rec.mesh, gt, &s.cloud.points, &sc))
-                    .transpose()?;
-                Ok((rec.report.iterations, cs))
-            })
-            .collect::<Result<Vec<_>, MetricsError>>()?;
+            let cold = cold_references(&s.cloud, &engine.membranes, &cfg.pipeline, cold_repeats)?
+                .iter()
+                .map(|rec| {
+                    let cs = gt
+                        .as_ref()
+                        .map(|gt| score_frame(&rec.mesh, gt, &s.cloud.points, &sc))
+                        .transpose()?;
+                    Ok((rec.report.iterations, cs))
+                })
+                .collect::<Result<Vec<_>, MetricsError>>()?;
             out.push(ScoredFrame {
                 key: s.key.clone(),
                 stamp_ns,

@@ -420,7 +420,7 @@ pub fn run_opts(
                     if opts.compare_cold {
                         let refs = cold_references(
                             &sc.cloud,
-                            &engine.membranes.cold,
+                            &engine.membranes,
                             &cfg.pipeline,
                             opts.cold_repeats.max(1),
                         )
