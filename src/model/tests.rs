@@ -198,6 +198,28 @@ fn a_swapped_object_resets_the_model_within_two_frames() {
 }
 
 #[test]
+fn a_swapped_object_seen_only_within_the_old_ones_outline_resets_the_model() {
+    // The new object's front lies on the ball's (a slab as wide and deep
+    // as the ball, a quarter as tall): no view sees through the ball's
+    // model, but most of it lies past the slab's silhouette.
+    let ball = sphere(0.05, 6_000);
+    let slab = cuboid(Vec3::new(0.05, 0.012, 0.05), 3_000);
+    let mut model = ObjectModel::new(ModelConfig::default(), 0.1);
+    for k in 0..10 {
+        let a = 0.1 * k as f64;
+        assert!(!model.integrate(&view(&ball, &pose(a)), &pose(a)).reset);
+    }
+    let swapped = model.integrate(&view(&slab, &pose(0.0)), &pose(0.0));
+    assert!(swapped.reset, "{swapped:?}");
+    // The ball itself, seen again, is not.
+    let mut model = ObjectModel::new(ModelConfig::default(), 0.1);
+    for k in 0..11 {
+        let a = 0.1 * (k % 10) as f64;
+        assert!(!model.integrate(&view(&ball, &pose(a)), &pose(a)).reset);
+    }
+}
+
+#[test]
 fn memory_stays_under_the_cap_over_a_long_noisy_sequence() {
     let cfg = ModelConfig::try_from(ModelParams {
         max_voxels: 3_000,

@@ -155,14 +155,14 @@ impl VoxelMemory {
         &mut self,
         frame: u32,
         forget_after: u16,
-        mut seen_through: impl FnMut(&Vec3) -> Option<bool>,
+        mut seen_through: impl FnMut(&Voxel) -> Option<bool>,
     ) -> (usize, usize) {
         let (mut tested, mut contradicted) = (0, 0);
         self.voxels.retain(|_, v| {
             if v.last_seen == frame {
                 return true;
             }
-            match seen_through(&v.position()) {
+            match seen_through(v) {
                 Some(true) => {
                     tested += 1;
                     contradicted += 1;
@@ -282,7 +282,7 @@ mod tests {
             0,
             1.0,
         );
-        let through = |p: &Vec3| Some(p.x < 1.0);
+        let through = |v: &Voxel| Some(v.position().x < 1.0);
         assert_eq!(mem.contradict(1, 2, through), (2, 1));
         assert_eq!(mem.len(), 2);
         assert_eq!(mem.contradict(2, 2, through), (2, 1));

@@ -22,7 +22,11 @@
 //!    frame adopts a rebuild on this frame's model (`refit.path`
 //!    "background"); else it starts cold: on the fused model, which it
 //!    keeps, for a refit (once per surface), or from this frame alone (the
-//!    track is lost, and the model restarts);
+//!    track is lost, and the model restarts); a tracked frame whose view
+//!    contradicts the fused model restarts the model
+//!    ([`crate::model::ObjectModel::integrate`]: the object changed or was
+//!    swapped) and starts cold too (reason `contradicted`): the previous
+//!    surface is the old object's;
 //! 4. evolves the membrane (paper §III-D/E steps 2–5) under the frame's
 //!    budget: an iteration cap (small for warm frames) and a wall-clock
 //!    deadline shared by all attempts of the frame;
@@ -445,6 +449,15 @@ pub enum PathReason {
         /// Frames since the rebuild started.
         age: u64,
     },
+    /// Tracked, but the view saw through (or past the silhouette of) more
+    /// than `model.reset_share` of the fused model's voxels it could judge:
+    /// the object changed or was swapped. The model restarted from this
+    /// view, and the frame starts cold: the previous surface is the old
+    /// object's.
+    Contradicted {
+        /// The share of the judged voxels the view contradicted.
+        share: f64,
+    },
     /// A warm result failed one of the checks above, and its cold redo
     /// failed that check too: the frame itself separates worse (a thinner
     /// or edge-on view), and the warm result, which keeps what earlier
@@ -470,6 +483,7 @@ impl fmt::Display for PathReason {
             Self::LostTrack { inliers } => write!(f, "lost_track({inliers:.2})"),
             Self::Refit { surface, model } => write!(f, "refit({surface:.2},model={model:.2})"),
             Self::Rebuilt { age } => write!(f, "rebuilt({age})"),
+            Self::Contradicted { share } => write!(f, "contradicted({share:.2})"),
             Self::WarmKept { eta, cold } => write!(f, "warm_kept({eta:.3},cold={cold:.3})"),
         }
     }
@@ -804,9 +818,13 @@ impl Tracker {
         let size = cloud.aabb().longest_edge();
 
         let rebuilds = membranes.rebuild.is_some();
-        let (path, mut reason, mut warm, motion) =
+        let (mut path, mut reason, mut warm, motion) =
             self.choose_path(cloud, centroid, size, cfg, rebuilds);
-        let (fused_all, model_reset) = self.fuse(raw, motion, size, cfg);
+        let (fused_all, reset) = self.fuse(raw, motion, size, cfg);
+        let model_reset = reset.is_some();
+        if let (Some(share), StartPath::Warm) = (reset, path) {
+            (path, reason, warm) = (StartPath::Cold, PathReason::Contradicted { share }, None);
+        }
         let mut model_restarted = false;
         let mut rebuild_wait = Duration::ZERO;
         if let Some(w) = warm.as_mut() {
@@ -1008,31 +1026,33 @@ impl Tracker {
 
     /// Fuse this frame into the stream's model (unless `pipeline.model` is
     /// null) and return the fused points in this frame's cloud frame, the
-    /// input of the membrane, and whether the view restarted the model
-    /// ([`FrameResult::model_reset`]). A cold frame restarts the model.
+    /// input of the membrane, and, when the view restarted the model
+    /// ([`FrameResult::model_reset`]), the share of the judged voxels it
+    /// contradicted. A cold frame restarts the model.
     fn fuse(
         &mut self,
         raw: &PointCloud,
         motion: Option<align::Rigid>,
         size: f64,
         cfg: &PipelineConfig,
-    ) -> (Option<PointCloud>, bool) {
+    ) -> (Option<PointCloud>, Option<f64>) {
         if cfg.model.is_none() {
-            return (None, false);
+            return (None, None);
         }
         // A warm frame, or a refit (cold, with a motion), moves the model on.
         let reset = match (motion, self.fused.as_mut()) {
             (Some(m), Some(f)) => {
                 f.pose = m * f.pose;
-                let reset = f.model.integrate(&raw.points, &f.pose).reset;
-                if reset {
+                let fused = f.model.integrate(&raw.points, &f.pose);
+                if fused.reset {
                     f.normals = kept_normals::KeptNormals::default();
                 }
-                reset
+                let share = fused.voxels_contradicted as f64 / fused.voxels_tested.max(1) as f64;
+                fused.reset.then_some(share)
             }
             _ => {
                 self.restart_fused(raw, size, cfg);
-                false
+                None
             }
         };
         let points =
