@@ -157,15 +157,23 @@ fn the_carving_is_the_views_free_space_seen_from_the_sensor() {
     assert!(model.bytes() <= model.config().max_bytes());
 }
 
+/// A model of a 5 cm ball fused from `views` views turning by 0.1 rad
+/// (and back to the first after ten), none of which restarts it.
+fn ball_model(views: usize) -> ObjectModel {
+    let ball = sphere(0.05, 6_000);
+    let mut model = ObjectModel::new(ModelConfig::default(), 0.1);
+    for k in 0..views {
+        let a = 0.1 * (k % 10) as f64;
+        let fused = model.integrate(&view(&ball, &pose(a)), &pose(a));
+        assert!(!fused.reset, "view {k}: {fused:?}");
+    }
+    model
+}
+
 #[test]
 fn a_swapped_object_resets_the_model_within_two_frames() {
-    let ball = sphere(0.05, 6_000);
     let brick = cuboid(Vec3::new(0.02, 0.06, 0.02), 1_500);
-    let mut model = ObjectModel::new(ModelConfig::default(), 0.1);
-    for k in 0..10 {
-        let a = 0.1 * k as f64;
-        assert!(!model.integrate(&view(&ball, &pose(a)), &pose(a)).reset);
-    }
+    let mut model = ball_model(10);
     // The brick stands 4 cm nearer, inside what the ball's views hold.
     // The brick stands where the ball stood, 2 cm thinner toward the
     // camera: the camera now sees through the ball's front. The tracker
@@ -198,25 +206,33 @@ fn a_swapped_object_resets_the_model_within_two_frames() {
 }
 
 #[test]
-fn a_swapped_object_seen_only_within_the_old_ones_outline_resets_the_model() {
-    // The new object's front lies on the ball's (a slab as wide and deep
-    // as the ball, a quarter as tall): no view sees through the ball's
-    // model, but most of it lies past the slab's silhouette.
-    let ball = sphere(0.05, 6_000);
-    let slab = cuboid(Vec3::new(0.05, 0.012, 0.05), 3_000);
-    let mut model = ObjectModel::new(ModelConfig::default(), 0.1);
-    for k in 0..10 {
-        let a = 0.1 * k as f64;
-        assert!(!model.integrate(&view(&ball, &pose(a)), &pose(a)).reset);
-    }
+fn a_swapped_object_is_judged_beside_its_silhouette_too() {
+    // A slab as wide and deep as the ball, a quarter as tall, its front
+    // 1 cm behind the ball's: the view sees through the ball's front
+    // within the slab's outline, and most of the ball lies beside it.
+    let slab: Vec<(Vec3, Vec3)> = cuboid(Vec3::new(0.05, 0.012, 0.04), 3_000)
+        .into_iter()
+        .map(|(p, n)| (p + Vec3::new(0.0, 0.0, 0.01), n))
+        .collect();
+    let mut model = ball_model(10);
     let swapped = model.integrate(&view(&slab, &pose(0.0)), &pose(0.0));
     assert!(swapped.reset, "{swapped:?}");
-    // The ball itself, seen again, is not.
-    let mut model = ObjectModel::new(ModelConfig::default(), 0.1);
-    for k in 0..11 {
-        let a = 0.1 * (k % 10) as f64;
-        assert!(!model.integrate(&view(&ball, &pose(a)), &pose(a)).reset);
-    }
+    assert!(
+        swapped.voxels_beside * 2 > swapped.voxels_tested,
+        "{swapped:?}"
+    );
+    // The ball seen through a slit (what an occluder leaves of it): the
+    // view sees through none of it, and what lies beside the slit does
+    // not count.
+    let ball = sphere(0.05, 6_000);
+    let slit: Vec<Vec3> = view(&ball, &pose(0.0))
+        .into_iter()
+        .filter(|p| p.y.abs() < 0.012)
+        .collect();
+    let mut model = ball_model(10);
+    let occluded = model.integrate(&slit, &pose(0.0));
+    assert!(!occluded.reset, "{occluded:?}");
+    assert_eq!(occluded.voxels_beside, 0, "{occluded:?}");
 }
 
 #[test]
