@@ -141,10 +141,17 @@ fn every_committed_sequence_is_meshed_within_the_model_cap() {
 
 #[test]
 fn replay_names_the_frames_whose_view_restarted_the_model() {
-    // The swap with the track never lost (`icp_min_inliers` null): no cold
-    // start restarts the model, and the mug's view sees through the
-    // bottle's model (the swap at frame 20). The bottle stands inside the
-    // box's volume, so at frame 10 the box's model is not seen through.
+    // The swap with the track never lost (`icp_min_inliers` null): no lost
+    // track restarts the model. The bottle stands inside the box's volume,
+    // so at frame 10 its view sees through little of the box's model (0.23
+    // of the voxels it judges), but most of the box's model lies beside
+    // the bottle's silhouette: the model restarts there
+    // (`model::ObjectModel::integrate`). (Before the silhouette counted,
+    // the mug's view restarted the box-and-bottle model at frame 20; on
+    // the bottle's own model it sees through 0.47 of what it judges,
+    // below `reset_share`, and the bottle's model lies within the mug's
+    // silhouette: the default `icp_min_inliers` loses that track,
+    // tests/tracking.rs.)
     let out = replay_with("swap", &["-q", "--set", "pipeline.icp_min_inliers=null"]);
     let model = line(&out, "model ");
     let frames: Vec<u64> = model
@@ -154,7 +161,7 @@ fn replay_names_the_frames_whose_view_restarted_the_model() {
         .split(", ")
         .map(|f| f.trim().parse().unwrap())
         .collect();
-    assert!(frames.iter().any(|f| (20..=22).contains(f)), "{model}");
+    assert!(frames.iter().any(|f| (10..=12).contains(f)), "{model}");
     assert!(model.contains("reset_share"), "{model}");
 }
 

@@ -102,7 +102,8 @@
 //! frame 19, F 0.21–0.27 over frames 10–16), a sphere's for an ellipsoid
 //! (frame 18) and a rounded box's for a bottle (frame 11). A view also
 //! contradicts a voxel that lies more than [`OUTSIDE_VOXELS`] voxel edges
-//! beside its silhouette, when `confirm.min_hits` frames hit it (counted
+//! beside its silhouette, when `confirm.min_hits` frames (2 without
+//! `confirm`) hit it (counted
 //! on every voxel, a sensor's outliers, most of them hit once, restarted
 //! all five models at frames without a swap: 8, 9, 16, 17, 27), and when
 //! the view also sees through at least [`SEEN_THROUGH_WITH_OUTSIDE`] (a
@@ -434,7 +435,7 @@ impl ObjectModel {
     fn contradict(&mut self, view: &DepthView) -> (usize, usize, usize) {
         let (frame, voxel) = (self.frame, self.memory.voxel_size());
         let (mut judged, mut through, mut outside) = (0, 0, 0);
-        let firm = self.cfg.0.confirm.map_or(1, |c| c.min_hits);
+        let firm = self.cfg.0.confirm.map_or(2, |c| c.min_hits);
         self.memory.contradict(frame, self.cfg.0.forget_after, |v| {
             let p = &v.position();
             let (evidence, within_voxel) = view.evidence_and_within(p, voxel);
