@@ -297,15 +297,10 @@ fn matched(
 ) -> Vec<Option<(usize, Vec3)>> {
     let (index, inv) = (normals.index(), motion.inverse());
     let stride = (data.len() / max_points.max(1)).max(1);
-    let mut wanted = vec![false; index.len()];
-    let matches = nearest_of_sampled(index, data, &inv, stride)
-        .map(|(_, local, d2, vertex)| {
-            let near = d2 <= reach * reach;
-            wanted[vertex] |= near;
-            near.then_some((vertex, local))
-        })
+    let matches: Vec<Option<(usize, Vec3)>> = nearest_of_sampled(index, data, &inv, stride)
+        .map(|(_, local, d2, vertex)| (d2 <= reach * reach).then_some((vertex, local)))
         .collect();
-    normals.cover(&wanted);
+    normals.cover_points(matches.iter().flatten().map(|&(vertex, _)| vertex));
     matches
 }
 
