@@ -25,8 +25,10 @@
 //!    track is lost, and the model restarts); a tracked frame whose view
 //!    contradicts the fused model restarts the model
 //!    ([`crate::model::ObjectModel::integrate`]: the object changed or was
-//!    swapped) and starts cold too (reason `contradicted`): the previous
-//!    surface is the old object's;
+//!    swapped; reason `contradicted`): with the rebuild on, it starts warm
+//!    and hastens a rebuild on the new model for the next frame (no
+//!    latency spike), else it starts cold, since the previous surface is
+//!    the old object's;
 //! 4. evolves the membrane (paper §III-D/E steps 2–5) under the frame's
 //!    budget: an iteration cap (small for warm frames) and a wall-clock
 //!    deadline shared by all attempts of the frame;
@@ -452,7 +454,12 @@ pub enum PathReason {
     /// Tracked, but the view saw through (or past the silhouette of) more
     /// than `model.reset_share` of the fused model's voxels it could judge:
     /// the object changed or was swapped. The model restarted from this
-    /// view, and the frame starts cold: the previous surface is the old
+    /// view. With `pipeline.rebuild` the frame starts warm, from the
+    /// previous surface moved by the track, without the η_g checks against
+    /// the old object's frames, and hastens a background rebuild on the new
+    /// model that the next frame adopts: no cold start's latency spike, and
+    /// a frame later the new object's cold surface replaces the old one's.
+    /// Without it the frame starts cold: the previous surface is the old
     /// object's.
     Contradicted {
         /// The share of the judged voxels the view contradicted.
@@ -822,8 +829,14 @@ impl Tracker {
             self.choose_path(cloud, centroid, size, cfg, rebuilds);
         let (fused_all, reset) = self.fuse(raw, motion, size, cfg);
         let model_reset = reset.is_some();
-        if let (Some(share), StartPath::Warm) = (reset, path) {
-            (path, reason, warm) = (StartPath::Cold, PathReason::Contradicted { share }, None);
+        let contradicted = matches!((reset, path), (Some(_), StartPath::Warm));
+        if let (Some(share), true) = (reset, contradicted) {
+            // The rebuild in flight is the old object's.
+            self.rebuild = None;
+            reason = PathReason::Contradicted { share };
+            if !rebuilds {
+                (path, warm) = (StartPath::Cold, None);
+            }
         }
         let mut model_restarted = false;
         let mut rebuild_wait = Duration::ZERO;
@@ -890,7 +903,10 @@ impl Tracker {
 
         let completed = rec.report.points_completed > 0;
         let was_completed = self.previous.as_ref().is_some_and(|p| p.completed);
-        let comparable = |prev: &&Previous| prev.completed == completed;
+        // A contradicted frame's previous surface is the old object's: its
+        // η_g is no yardstick, and the hastened rebuild, not a cold redo,
+        // brings the new object's cold surface.
+        let comparable = |prev: &&Previous| prev.completed == completed && !contradicted;
         if path == StartPath::Warm {
             if let Some(prev) = self.previous.as_ref().filter(comparable) {
                 let eta = rec.report.eta_final;
@@ -981,7 +997,8 @@ impl Tracker {
         // refit or a shape prior's switch hastens one (`start_rebuild`).
         let cut_short = rec.report.stop == membrane::StopReason::Deadline;
         let refit = matches!(reason, PathReason::Refit { .. });
-        let urgent = final_path == StartPath::Warm && (refit || was_completed != completed);
+        let urgent =
+            final_path == StartPath::Warm && (refit || contradicted || was_completed != completed);
         let rebuild_starved = match final_path {
             StartPath::Cold if !cut_short => {
                 self.rebuild = None;
