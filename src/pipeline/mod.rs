@@ -459,8 +459,14 @@ pub enum PathReason {
     /// the old object's frames, and hastens a background rebuild on the new
     /// model that the next frame adopts: no cold start's latency spike, and
     /// a frame later the new object's cold surface replaces the old one's.
-    /// Without it the frame starts cold: the previous surface is the old
-    /// object's.
+    /// That rebuild runs at the process's own priority even when frames
+    /// have a deadline ([`rebuild::Urgency::Awaited`]; frames still do not
+    /// wait for it): under two busy loops on two cores, `sepmem replay
+    /// --realtime` (one thread) of the three synth swaps whose track is
+    /// kept adopted it the next frame at all 4 restarts (F 0.20–0.25 ->
+    /// 0.43–0.54), and at the lowest priority at none of 4 within 5 frames.
+    /// Without the rebuild the frame starts cold: the previous surface is
+    /// the old object's.
     Contradicted {
         /// The share of the judged voxels the view contradicted.
         share: f64,
@@ -989,9 +995,12 @@ impl Tracker {
             refitted: final_path == StartPath::Cold && matches!(reason, PathReason::Refit { .. }),
             completed,
         });
+        // The rebuild of a contradicted frame replaces a surface known to
+        // be the old object's: at the process's own priority, so that a
+        // busy machine does not starve it (`PathReason::Contradicted`).
         let urgency = match deadline {
-            Some(_) => rebuild::Urgency::Idle,
-            None => rebuild::Urgency::Awaited,
+            Some(_) if !contradicted => rebuild::Urgency::Idle,
+            _ => rebuild::Urgency::Awaited,
         };
         // A cold frame starts no rebuild unless its deadline cut it short; a
         // refit or a shape prior's switch hastens one (`start_rebuild`).

@@ -178,6 +178,9 @@ pub enum Urgency {
     /// At the lowest, a frame would wait behind every other busy process
     /// of the machine (a priority inversion: under two busy loops the
     /// lock-step node test's frames waited seconds for their rebuilds).
+    /// Also the rebuild of a frame whose view contradicted its model, with
+    /// or without a deadline: the surface it replaces is the old object's
+    /// (`pipeline::PathReason::Contradicted`).
     Awaited,
     /// An [`Urgency::Idle`] rebuild that the machine left no idle time for
     /// ([`RebuildConfig::starved_frames`]), run again at [`STARVED_NICE`]:
