@@ -464,7 +464,7 @@ pub enum PathReason {
     /// wait for it): under two busy loops on two cores, `sepmem replay
     /// --realtime` (one thread) of the three synth swaps whose track is
     /// kept adopted it the next frame at all 4 restarts (F 0.20–0.25 ->
-    /// 0.43–0.54), and at the lowest priority at none of 4 within 5 frames.
+    /// 0.42–0.54), and at the lowest priority at none of 4 within 5 frames.
     /// Without the rebuild the frame starts cold: the previous surface is
     /// the old object's.
     Contradicted {
