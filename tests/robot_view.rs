@@ -154,13 +154,7 @@ fn replay_names_the_frames_whose_view_restarted_the_model() {
     // tests/tracking.rs.)
     let out = replay_with("swap", &["-q", "--set", "pipeline.icp_min_inliers=null"]);
     let model = line(&out, "model ");
-    let frames: Vec<u64> = model
-        .split("swapped): frame ")
-        .nth(1)
-        .unwrap_or_else(|| panic!("no restart in {model}"))
-        .split(", ")
-        .map(|f| f.trim().parse().unwrap())
-        .collect();
+    let frames = common::model_restarts(&out);
     assert!(frames.iter().any(|f| (10..=12).contains(f)), "{model}");
     assert!(model.contains("reset_share"), "{model}");
 }

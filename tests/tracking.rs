@@ -322,16 +322,6 @@ fn without_the_rebuild_a_contradicted_frame_starts_cold() {
     }
 }
 
-/// The frames whose view restarted the stream's model, from `out`'s
-/// `model` summary line (none when it names none).
-fn model_restarts(out: &str) -> Vec<usize> {
-    out.lines()
-        .filter(|l| l.starts_with("model "))
-        .filter_map(|l| l.split("swapped): frame ").nth(1))
-        .flat_map(|list| list.split(", ").filter_map(|f| f.trim().parse().ok()))
-        .collect()
-}
-
 /// F_cold of warm frame `frame` in `out`'s table (`--compare-cold`).
 fn cold_f(out: &str, frame: usize) -> f64 {
     let row = out
@@ -352,7 +342,7 @@ fn cold_f(out: &str, frame: usize) -> f64 {
 fn assert_swap_recovers(out: &str) {
     let rows = frame_rows(out);
     assert_eq!(rows.len(), 30, "{out}");
-    let restarted = model_restarts(out);
+    let restarted = common::model_restarts(out);
     for swap in [10, 20] {
         // Reset: a cold frame (a lost track restarts the model), or a
         // tracked frame whose view contradicted the model.

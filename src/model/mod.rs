@@ -112,12 +112,13 @@
 //! the view then sees through none of what it shows (`tests/fused_model.rs`,
 //! a still sphere seen as one strip, then as another across it, restarted
 //! without this). The swaps' views saw through 0.15–0.36 of the voxels they
-//! judged, the frames around them 0.01–0.08. The three
-//! now restart within a frame of the swap, and the frame starts cold (the
-//! pipeline's `contradicted`): F a frame after the swap 0.25 → 0.42 (the
+//! judged, the frames around them 0.01–0.08. The three now restart within
+//! a frame of the swap; started cold there at first (the pipeline's
+//! `contradicted`), they scored a frame after the swap 0.25 → 0.42 (the
 //! tube), 0.21 → 0.85 (the bottle), 0.27 → 0.50 (the ellipsoid), and five
-//! frames after 0.28 → 0.51, 0.89 → 0.90, 0.37 → 0.58. One voxel edge restarted a rounded box orbited at 0.8 m, tracked within
-//! 0.5°, at frame 11 (last-third F 0.858 → 0.518); two do not. Over the 83
+//! frames after 0.28 → 0.51, 0.89 → 0.90, 0.37 → 0.58. One voxel edge
+//! restarted a rounded box orbited at 0.8 m, tracked within 0.5°, at frame
+//! 11 (last-third F 0.858 → 0.518); two do not. Over the 83
 //! sequences of `benches/robot_view_eval.sh` the mean last-third F is as
 //! before (0.8359 → 0.8356): the orbited mug (frame 29) and the turning
 //! bowl (frame 19), whose models restarted before, then started those

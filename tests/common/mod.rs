@@ -99,6 +99,16 @@ pub fn figure(text: &str, label: &str) -> f64 {
         .unwrap_or_else(|| panic!("no figure after `{label}` in {text}"))
 }
 
+/// The frames whose view restarted a stream's model, from the `model`
+/// summary lines of `sepmem replay`'s output (none when they name none).
+pub fn model_restarts(out: &str) -> Vec<usize> {
+    out.lines()
+        .filter(|l| l.starts_with("model "))
+        .filter_map(|l| l.split("swapped): frame ").nth(1))
+        .flat_map(|list| list.split(", ").filter_map(|f| f.trim().parse().ok()))
+        .collect()
+}
+
 /// Run the built `sepmem` with `args`; its stdout, after asserting that it
 /// succeeded (the failure message holds both streams).
 pub fn sepmem_stdout<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> String {
