@@ -146,7 +146,7 @@ use voxels::VoxelMemory;
 /// How many voxel edges beside a view's silhouette a confirmed voxel must
 /// lie for the view to contradict it, in the count that restarts the model
 /// (module docs: one restarted a well-tracked orbited box).
-const OUTSIDE_VOXELS: f64 = 2.0;
+pub const OUTSIDE_VOXELS: f64 = 2.0;
 
 /// Least share of the voxels a view judges (in front of its seen surface
 /// or on it) that it must see through for its confirmed voxels beside the
@@ -376,13 +376,36 @@ impl ObjectModel {
     /// Fuse one frame: `points` in the sensor's frame (the camera at the
     /// origin), `object_to_sensor` the tracked pose of the object.
     pub fn integrate(&mut self, points: &[Vec3], object_to_sensor: &Rigid) -> Integration {
+        let view = self.view_under(points, object_to_sensor);
+        self.integrate_seen(points, object_to_sensor, view)
+    }
+
+    /// The depth view of a frame's `points` (in the sensor's frame) in the
+    /// object's frame of `object_to_sensor`, as [`Self::integrate`] judges
+    /// the model with it; `None` for too few points or a degenerate view.
+    pub fn view_under(&self, points: &[Vec3], object_to_sensor: &Rigid) -> Option<DepthView> {
         let to_object = object_to_sensor.inverse();
         let local: Vec<Vec3> = points
             .iter()
             .map(|p| to_object.transform_point(&(*p).into()).coords)
             .collect();
         let eye = to_object.translation.vector;
-        let view = DepthView::new(&local, eye, self.cfg.0.margin, self.cfg.0.view_side);
+        DepthView::new(&local, eye, self.cfg.0.margin, self.cfg.0.view_side)
+    }
+
+    /// [`Self::integrate`] with the frame's view, from [`Self::view_under`]
+    /// the same `points` and `object_to_sensor`.
+    pub fn integrate_seen(
+        &mut self,
+        points: &[Vec3],
+        object_to_sensor: &Rigid,
+        view: Option<DepthView>,
+    ) -> Integration {
+        let to_object = object_to_sensor.inverse();
+        let local: Vec<Vec3> = points
+            .iter()
+            .map(|p| to_object.transform_point(&(*p).into()).coords)
+            .collect();
         self.frame = self.frame.wrapping_add(1);
         let (tested, contradicted, beside) = match &view {
             Some(v) => self.contradict(v),

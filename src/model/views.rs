@@ -192,6 +192,55 @@ impl DepthView {
         };
         (judge(self.margin), judge(self.margin.max(thick)))
     }
+
+    /// What this view says of `points` (in its frame), each the mean of a
+    /// voxel of edge `voxel`: how many lie on its seen surface (judged at
+    /// least a voxel thick), and how many where it saw empty space: in
+    /// front of that surface, or beside its silhouette by more than
+    /// `beside`. Points behind the surface, or out of its image, it cannot
+    /// judge.
+    pub fn agreement(
+        &self,
+        points: impl IntoIterator<Item = Vec3>,
+        voxel: f64,
+        beside: f64,
+    ) -> Agreement {
+        let mut a = Agreement::default();
+        for p in points {
+            match self.evidence_and_within(&p, voxel).1 {
+                Evidence::SeenThrough => a.conflict += 1,
+                Evidence::OutsideSilhouette if self.beside_by_more_than(&p, beside) => {
+                    a.conflict += 1;
+                }
+                Evidence::Surface => a.support += 1,
+                Evidence::OutsideSilhouette | Evidence::Unknown => {}
+            }
+        }
+        a
+    }
+}
+
+/// What one view says of a set of points ([`DepthView::agreement`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Agreement {
+    /// Points on the view's seen surface.
+    pub support: usize,
+    /// Points where the view saw empty space.
+    pub conflict: usize,
+}
+
+impl Agreement {
+    /// The share of the judged points (support and conflict) in conflict;
+    /// 0 when the view judged none.
+    pub fn conflict_share(&self) -> f64 {
+        self.conflict as f64 / (self.support + self.conflict).max(1) as f64
+    }
+
+    /// Support minus conflict.
+    pub fn net(&self) -> i64 {
+        let count = |n: usize| i64::try_from(n).unwrap_or(i64::MAX);
+        count(self.support) - count(self.conflict)
+    }
 }
 
 /// The kept views of one object, bounded in number.
@@ -314,6 +363,31 @@ mod tests {
         assert!(!view.is_free_beyond(&front(6.0), tol));
         // Far beside the image: the camera saw past the object.
         assert!(view.is_free_beyond(&Vec3::new(4.0, 0.0, 0.0), tol));
+    }
+
+    #[test]
+    fn a_pose_that_swings_the_model_into_seen_space_conflicts_with_the_view() {
+        // A capsule-like rod along x seen from its side: the model's points
+        // (the whole rod's surface) agree with the view at the true pose;
+        // turned 30 degrees about the view's vertical axis, the rod's ends
+        // swing in front of the seen surface and beside the silhouette.
+        let eye = Vec3::new(0.0, 0.0, 3.0);
+        let rod: Vec<Vec3> = crate::shapes::fibonacci_sphere(6_000)
+            .into_iter()
+            .map(|p| Vec3::new(4.0 * p.x, p.y, p.z))
+            .collect();
+        let seen: Vec<Vec3> = rod.iter().filter(|p| p.z > 0.2).copied().collect();
+        let view = DepthView::new(&seen, eye, 2.0, 256).unwrap();
+        let (voxel, beside) = (0.05, 0.1);
+        let at_truth = view.agreement(rod.iter().copied(), voxel, beside);
+        // 399 of the 6 000 lie on the seen surface, none in seen space.
+        assert!(at_truth.support > 200, "{at_truth:?}");
+        assert!(at_truth.conflict_share() < 0.01, "{at_truth:?}");
+        let turn = nalgebra::Isometry3::rotation(Vec3::new(0.0, std::f64::consts::FRAC_PI_6, 0.0));
+        let turned = view.agreement(rod.iter().map(|p| turn * p), voxel, beside);
+        // 280 on the surface, 1 414 in seen space.
+        assert!(turned.conflict_share() > 0.5, "{turned:?}");
+        assert!(turned.net() < at_truth.net());
     }
 
     #[test]

@@ -50,6 +50,7 @@ pub mod engine;
 mod kept_normals;
 pub mod objects;
 pub mod outputs;
+pub mod pose_check;
 pub mod rebuild;
 pub mod reserve;
 pub mod snap;
@@ -63,6 +64,7 @@ use crate::membrane::{
     WarmStart,
 };
 use crate::mesh::TriMesh;
+use crate::model::views::DepthView;
 use crate::normals::NormalsOnDemand;
 use crate::spatial::KnnIndex;
 use crate::spline::ClosedSurface;
@@ -131,6 +133,11 @@ pub struct PipelineConfig {
     /// ([`align::align_to_points`]); `None` (null): the previous surface
     /// alone gives the motion.
     pub model_icp: Option<ModelIcpConfig>,
+    /// With `model`: a registered pose under which the frame's own view
+    /// sees much of the model where it saw empty space is re-derived from
+    /// the last frame's motion ([`pose_check`]); `None` (null): the
+    /// registration's pose stands.
+    pub pose_check: Option<pose_check::PoseCheckConfig>,
     /// With `model`: a cold membrane on the fused model runs in the
     /// background, and a later warm frame starts from its surface
     /// ([`rebuild`]); `None` (null): the warm chain alone.
@@ -189,6 +196,7 @@ impl Default for PipelineConfig {
                 path: RefitPath::Background,
             }),
             model_icp: Some(ModelIcpConfig::default()),
+            pose_check: Some(pose_check::PoseCheckConfig::default()),
             rebuild: Some(rebuild::RebuildConfig::default()),
             snap: Some(snap::SnapConfig::default()),
             warm_density_sample: 256,
@@ -662,6 +670,11 @@ struct Fused {
     pose: align::Rigid,
     /// The model's normals kept for its registration.
     normals: kept_normals::KeptNormals,
+    /// The frame's depth view in the object's frame of a pose (object →
+    /// this frame's cloud frame), built by the pose check
+    /// ([`pose_check`]) for the fusion to take when the frame keeps that
+    /// pose.
+    seen: Option<(align::Rigid, DepthView)>,
 }
 
 /// Per-stream state: the previous surface for warm starts, and counts.
@@ -832,7 +845,7 @@ impl Tracker {
 
         let rebuilds = membranes.rebuild.is_some();
         let (mut path, mut reason, mut warm, motion) =
-            self.choose_path(cloud, centroid, size, cfg, rebuilds);
+            self.choose_path((cloud, raw), (centroid, size), cfg, rebuilds);
         let (fused_all, reset) = self.fuse(raw, motion, size, cfg);
         let model_reset = reset.is_some();
         let contradicted = matches!((reset, path), (Some(_), StartPath::Warm));
@@ -1069,7 +1082,14 @@ impl Tracker {
         let reset = match (motion, self.fused.as_mut()) {
             (Some(m), Some(f)) => {
                 f.pose = m * f.pose;
-                let fused = f.model.integrate(&raw.points, &f.pose);
+                // The pose check's view, when it was built under this pose.
+                let seen = f
+                    .seen
+                    .take()
+                    .filter(|(at, _)| *at == f.pose)
+                    .map(|(_, v)| v);
+                let view = seen.or_else(|| f.model.view_under(&raw.points, &f.pose));
+                let fused = f.model.integrate_seen(&raw.points, &f.pose, view);
                 if fused.reset {
                     f.normals = kept_normals::KeptNormals::default();
                 }
@@ -1198,14 +1218,14 @@ impl Tracker {
             model,
             pose,
             normals,
+            seen: None,
         });
     }
 
     fn choose_path(
         &mut self,
-        cloud: &PointCloud,
-        centroid: Vec3,
-        size: f64,
+        (cloud, raw): (&PointCloud, &PointCloud),
+        (centroid, size): (Vec3, f64),
         cfg: &PipelineConfig,
         rebuilds: bool,
     ) -> Choice {
@@ -1238,12 +1258,30 @@ impl Tracker {
             .filter(|_| lost || cfg.model_icp.is_some())
             .map(|f| KnnIndex::new(f.model.points_in(&f.pose)));
         let motion = alignment.map_or(shift, |a| a.motion);
-        let motion = match (&fused, &cfg.model_icp, self.fused.as_mut()) {
-            (Some(index), Some(mi), Some(f)) => {
-                // A frame the previous surface lost is judged (a refit or a
-                // lost track) on the coarse registration alone.
-                let refine = mi.refine.as_ref().filter(|_| !lost);
-                on_model(index, f, cloud, motion, (mi, refine), scale)
+        // A frame the previous surface lost is judged (a refit or a lost
+        // track) on the coarse registration alone.
+        let model_icp = (fused.as_ref().zip(cfg.model_icp.as_ref()))
+            .map(|(index, mi)| (index, mi, mi.refine.as_ref().filter(|_| !lost), scale));
+        let motion = match (model_icp, self.fused.as_mut()) {
+            (Some(on), Some(f)) => {
+                let keep = on.1.keep_normals.map_or(0, |k| k.get());
+                f.normals.next_frame(f.model.voxel_edge(), keep);
+                on_model(on, f, cloud, motion)
+            }
+            _ => motion,
+        };
+        let motion = match (&cfg.pose_check, self.fused.as_mut()) {
+            (Some(check), Some(f)) => {
+                let own;
+                let model = match &fused {
+                    Some(index) => index.points(),
+                    None => {
+                        own = f.model.points_in(&f.pose);
+                        &own
+                    }
+                };
+                let motions = (motion, prev.motion);
+                checked_motion(check, (f, model), (cloud, raw), motions, model_icp)
             }
             _ => motion,
         };
@@ -1369,6 +1407,68 @@ fn refit_or_lost(
     }
 }
 
+/// What [`on_model`] registers against: the fused model's points (in the
+/// previous frame's cloud frame), `pipeline.model_icp`, its refine pass
+/// (none on a frame the previous surface lost) and the object's size.
+type OnModel<'a> = (
+    &'a KnnIndex,
+    &'a ModelIcpConfig,
+    Option<&'a RefineConfig>,
+    f64,
+);
+
+/// `motion` checked against the frame's own view of its points `raw`
+/// ([`pose_check`]): when the view sees too much of `fused`'s model
+/// (`model`: its points in the previous frame's cloud frame) where it saw
+/// empty space, the last frame's motion `velocity`, registered on the
+/// model's points (with `model_icp`, on the thinned `cloud`) and as it is,
+/// may replace it ([`pose_check::prefer`]). The view, built in the object's
+/// frame of the registered pose as the fusion builds it, is left in
+/// `fused` for the fusion when the pose stands; the frame's normals of the
+/// model stay in `fused` as [`on_model`] keeps them.
+fn checked_motion(
+    check: &pose_check::PoseCheckConfig,
+    (fused, model): (&mut Fused, &[Vec3]),
+    (cloud, raw): (&PointCloud, &PointCloud),
+    (motion, velocity): (align::Rigid, align::Rigid),
+    model_icp: Option<OnModel<'_>>,
+) -> align::Rigid {
+    let pose = motion * fused.pose;
+    let Some(view) = fused.model.view_under(&raw.points, &pose) else {
+        return motion;
+    };
+    let voxel = fused.model.voxel_edge();
+    // A model point of the previous cloud frame, moved by `m`, in the
+    // view's (object) frame.
+    let to_object = pose.inverse();
+    let agreement = |m: &align::Rigid| pose_check::agreement(&view, model, &(to_object * m), voxel);
+    let registered = agreement(&motion);
+    tracing::trace!(?registered, "pose_check");
+    if !check.doubts(&registered) {
+        fused.seen = Some((pose, view));
+        return motion;
+    }
+    tracing::debug!(
+        ?registered,
+        "pose_check: the registered pose conflicts with the frame's view"
+    );
+    // The normals the registered pose's steps kept, should it stand.
+    let kept = fused.normals.clone();
+    let registered_on = model_icp.map(|on| on_model(on, fused, cloud, velocity));
+    let candidates: Vec<align::Rigid> = registered_on.into_iter().chain([velocity]).collect();
+    let judged: Vec<_> = candidates.iter().map(agreement).collect();
+    match pose_check::prefer(&registered, &judged) {
+        Some(i) => {
+            tracing::debug!(chosen = ?judged[i], "pose_check: the last motion's pose replaces it");
+            candidates[i]
+        }
+        None => {
+            (fused.normals, fused.seen) = (kept, Some((pose, view)));
+            motion
+        }
+    }
+}
+
 /// `motion` refined against the fused model's points `index` (in the
 /// previous frame's cloud frame, `fused`'s pose) by `pipeline.model_icp`:
 /// its steps, then the `refine` pass from their motion, each kept only
@@ -1392,16 +1492,12 @@ fn refit_or_lost(
 /// truncated cost was lower by more than 17 %, and taking the lowest one
 /// whenever it was 3 % lower drifted further (110°).
 fn on_model(
-    index: &KnnIndex,
+    (index, cfg, refine, scale): OnModel<'_>,
     fused: &mut Fused,
     cloud: &PointCloud,
     motion: align::Rigid,
-    (cfg, refine): (&ModelIcpConfig, Option<&RefineConfig>),
-    scale: f64,
 ) -> align::Rigid {
     let (pose, kept) = (&fused.pose, &mut fused.normals);
-    let keep = cfg.keep_normals.map_or(0, |k| k.get());
-    kept.next_frame(fused.model.voxel_edge(), keep);
     let prior = |i: usize| kept.get(pose, &index.points()[i]);
     let Ok(model) = NormalsOnDemand::new(index, cfg.normal_k.get()) else {
         return motion;
