@@ -140,7 +140,7 @@ use crate::cloud::{Aabb, Vec3};
 use crate::membrane::view::FreeSpace;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
-use views::{DepthView, Evidence, ViewSet};
+use views::{DepthView, Evidence, Verdict, ViewSet};
 use voxels::VoxelMemory;
 
 /// How many voxel edges beside a view's silhouette a confirmed voxel must
@@ -384,12 +384,8 @@ impl ObjectModel {
     /// object's frame of `object_to_sensor`, as [`Self::integrate`] judges
     /// the model with it; `None` for too few points or a degenerate view.
     pub fn view_under(&self, points: &[Vec3], object_to_sensor: &Rigid) -> Option<DepthView> {
-        let to_object = object_to_sensor.inverse();
-        let local: Vec<Vec3> = points
-            .iter()
-            .map(|p| to_object.transform_point(&(*p).into()).coords)
-            .collect();
-        let eye = to_object.translation.vector;
+        let local = in_object_frame(points, object_to_sensor);
+        let eye = object_to_sensor.inverse().translation.vector;
         DepthView::new(&local, eye, self.cfg.0.margin, self.cfg.0.view_side)
     }
 
@@ -401,11 +397,7 @@ impl ObjectModel {
         object_to_sensor: &Rigid,
         view: Option<DepthView>,
     ) -> Integration {
-        let to_object = object_to_sensor.inverse();
-        let local: Vec<Vec3> = points
-            .iter()
-            .map(|p| to_object.transform_point(&(*p).into()).coords)
-            .collect();
+        let local = in_object_frame(points, object_to_sensor);
         self.frame = self.frame.wrapping_add(1);
         let (tested, contradicted, beside) = match &view {
             Some(v) => self.contradict(v),
@@ -468,17 +460,13 @@ impl ObjectModel {
         let (mut judged, mut through, mut outside) = (0, 0, 0);
         let firm = self.cfg.0.confirm.map_or(2, |c| c.min_hits);
         self.memory.contradict(frame, self.cfg.0.forget_after, |v| {
-            let p = &v.position();
-            let (evidence, within_voxel) = view.evidence_and_within(p, voxel);
-            match within_voxel {
-                Evidence::SeenThrough => (judged, through) = (judged + 1, through + 1),
-                Evidence::OutsideSilhouette
-                    if v.hits >= firm && view.is_free_beyond(p, OUTSIDE_VOXELS * voxel) =>
-                {
-                    outside += 1;
-                }
-                Evidence::Surface => judged += 1,
-                Evidence::Unknown | Evidence::OutsideSilhouette => {}
+            let beside = (v.hits >= firm).then_some(OUTSIDE_VOXELS * voxel);
+            let (evidence, verdict) = view.verdict(&v.position(), voxel, beside);
+            match verdict {
+                Verdict::SeenThrough => (judged, through) = (judged + 1, through + 1),
+                Verdict::Beside => outside += 1,
+                Verdict::Surface => judged += 1,
+                Verdict::Unjudged => {}
             }
             match evidence {
                 Evidence::SeenThrough => Some(true),
@@ -634,6 +622,16 @@ impl Carving<'_> {
     fn eye_in_cloud(&self, eye: Vec3) -> Vec3 {
         self.to_object.inverse_transform_point(&eye.into()).coords
     }
+}
+
+/// A frame's `points` (in the sensor's frame) in the object's frame of
+/// `object_to_sensor`.
+fn in_object_frame(points: &[Vec3], object_to_sensor: &Rigid) -> Vec<Vec3> {
+    let to_object = object_to_sensor.inverse();
+    points
+        .iter()
+        .map(|p| to_object.transform_point(&(*p).into()).coords)
+        .collect()
 }
 
 #[cfg(test)]

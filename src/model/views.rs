@@ -193,12 +193,30 @@ impl DepthView {
         (judge(self.margin), judge(self.margin.max(thick)))
     }
 
+    /// What this view says of the voxel mean `p` (voxels of edge
+    /// `voxel`): its evidence with the view's own seen surface, and its
+    /// [`Verdict`] with that surface at least a voxel thick, where a point
+    /// beside the silhouette is seen empty only when `beside` is given and
+    /// it lies farther off than that.
+    pub fn verdict(&self, p: &Vec3, voxel: f64, beside: Option<f64>) -> (Evidence, Verdict) {
+        let (evidence, within_voxel) = self.evidence_and_within(p, voxel);
+        let verdict = match within_voxel {
+            Evidence::SeenThrough => Verdict::SeenThrough,
+            Evidence::OutsideSilhouette
+                if beside.is_some_and(|tol| self.beside_by_more_than(p, tol)) =>
+            {
+                Verdict::Beside
+            }
+            Evidence::Surface => Verdict::Surface,
+            Evidence::OutsideSilhouette | Evidence::Unknown => Verdict::Unjudged,
+        };
+        (evidence, verdict)
+    }
+
     /// What this view says of `points` (in its frame), each the mean of a
-    /// voxel of edge `voxel`: how many lie on its seen surface (judged at
-    /// least a voxel thick), and how many where it saw empty space: in
-    /// front of that surface, or beside its silhouette by more than
-    /// `beside`. Points behind the surface, or out of its image, it cannot
-    /// judge.
+    /// voxel of edge `voxel` ([`Self::verdict`]): how many lie on its seen
+    /// surface, and how many where it saw empty space (seen through, or
+    /// beside its silhouette by more than `beside`).
     pub fn agreement(
         &self,
         points: impl IntoIterator<Item = Vec3>,
@@ -207,17 +225,28 @@ impl DepthView {
     ) -> Agreement {
         let mut a = Agreement::default();
         for p in points {
-            match self.evidence_and_within(&p, voxel).1 {
-                Evidence::SeenThrough => a.conflict += 1,
-                Evidence::OutsideSilhouette if self.beside_by_more_than(&p, beside) => {
-                    a.conflict += 1;
-                }
-                Evidence::Surface => a.support += 1,
-                Evidence::OutsideSilhouette | Evidence::Unknown => {}
+            match self.verdict(&p, voxel, Some(beside)).1 {
+                Verdict::SeenThrough | Verdict::Beside => a.conflict += 1,
+                Verdict::Surface => a.support += 1,
+                Verdict::Unjudged => {}
             }
         }
         a
     }
+}
+
+/// What a view says of a fused voxel, its seen surface taken at least a
+/// voxel thick ([`DepthView::verdict`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    /// In front of the seen surface: seen through.
+    SeenThrough,
+    /// Beside the silhouette by more than the tolerance asked.
+    Beside,
+    /// On the seen surface.
+    Surface,
+    /// Behind the surface, out of the image, or beside within the tolerance.
+    Unjudged,
 }
 
 /// What one view says of a set of points ([`DepthView::agreement`]).
