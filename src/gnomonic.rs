@@ -145,6 +145,17 @@ impl<T: Range> RangeImage<T> {
         }
     }
 
+    /// An empty image on the same bins.
+    pub fn empty_like(&self) -> Self {
+        Self {
+            frame: self.frame,
+            lo: self.lo,
+            inv_bin: self.inv_bin,
+            dims: self.dims,
+            near: vec![T::NONE; self.near.len()],
+        }
+    }
+
     /// The camera.
     pub fn frame(&self) -> &ViewFrame {
         &self.frame

@@ -839,6 +839,7 @@ fn every_committed_sepmem_bag_holds_metadata_that_rosbag2_reads() {
     assert_eq!(
         names,
         [
+            "tests/data/bags/robot_view/occluded_orbit.mcap",
             "tests/data/bags/robot_view/orbit_bent_tube.mcap",
             "tests/data/bags/robot_view/orbit_ycb_banana.mcap",
             "tests/data/bags/robot_view/swap.mcap",

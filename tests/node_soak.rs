@@ -111,8 +111,8 @@ fn a_looped_replay_keeps_the_fused_model_under_its_cap() {
     // The synth clouds are depth images in the camera's frame.
     assert_eq!(j["reasons"]["not_an_image"], 0, "{}", j["reasons"]);
     // The cap stated in launch/sepmem.json5: max_voxels * 66 + (max_views
-    // + 1) * 4 * view_side^2 at the defaults (60000, 12, 160).
-    let cap = 60_000 * 66 + 13 * 4 * 160 * 160;
+    // + 1) * 8 * view_side^2 at the defaults (60000, 12, 160).
+    let cap = 60_000 * 66 + 13 * 8 * 160 * 160;
     let model = j["model_bytes_max"].as_u64().unwrap();
     assert!(
         model > 0 && model <= cap,

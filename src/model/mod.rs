@@ -21,8 +21,10 @@
 //! cold restart of the tracker calls [`ObjectModel::reset`].
 //!
 //! Memory per object is bounded by `max_voxels · VOXEL_BYTES +
-//! (max_views + 1) · 4 · view_side²` bytes ([`ModelConfig::max_bytes`]):
-//! the kept views and the latest one.
+//! (max_views + 1) · 8 · view_side²` bytes ([`ModelConfig::max_bytes`]):
+//! the kept views and the latest one, each with the nearest range of the
+//! object and, in a labelled cloud, of what else the camera saw
+//! ([`views::DepthView::among`]).
 //!
 //! **Carving.** Once the fused points hold a second layer (other sides),
 //! the membrane no longer took them for one depth view; it took every
@@ -140,7 +142,7 @@ use crate::cloud::{Aabb, Vec3};
 use crate::membrane::view::FreeSpace;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
-use views::{DepthView, Evidence, Verdict, ViewSet};
+use views::{DepthView, Evidence, Occluders, Verdict, ViewSet};
 use voxels::VoxelMemory;
 
 /// How many voxel edges beside a view's silhouette a confirmed voxel must
@@ -315,7 +317,7 @@ impl ModelConfig {
     /// The most bytes one object's model holds.
     pub fn max_bytes(&self) -> usize {
         let p = &self.0;
-        p.max_voxels * VOXEL_BYTES + (p.max_views + 1) * 4 * p.view_side * p.view_side
+        p.max_voxels * VOXEL_BYTES + (p.max_views + 1) * 8 * p.view_side * p.view_side
     }
 }
 
@@ -376,17 +378,38 @@ impl ObjectModel {
     /// Fuse one frame: `points` in the sensor's frame (the camera at the
     /// origin), `object_to_sensor` the tracked pose of the object.
     pub fn integrate(&mut self, points: &[Vec3], object_to_sensor: &Rigid) -> Integration {
-        let view = self.view_under(points, object_to_sensor);
+        let view = self.view_under(points, &[], object_to_sensor);
         self.integrate_seen(points, object_to_sensor, view)
     }
 
     /// The depth view of a frame's `points` (in the sensor's frame) in the
     /// object's frame of `object_to_sensor`, as [`Self::integrate`] judges
     /// the model with it; `None` for too few points or a degenerate view.
-    pub fn view_under(&self, points: &[Vec3], object_to_sensor: &Rigid) -> Option<DepthView> {
+    ///
+    /// `others` are what else the camera saw in the frame (the other
+    /// objects and the background of a labelled cloud, sensor's frame):
+    /// where they lie nearer than the object, the view does not see the
+    /// space behind them empty ([`DepthView::among`]), so an object another
+    /// hides is neither carved nor forgotten there.
+    pub fn view_under(
+        &self,
+        points: &[Vec3],
+        others: &[Vec3],
+        object_to_sensor: &Rigid,
+    ) -> Option<DepthView> {
         let local = in_object_frame(points, object_to_sensor);
         let eye = object_to_sensor.inverse().translation.vector;
-        DepthView::new(&local, eye, self.cfg.0.margin, self.cfg.0.view_side)
+        let (margin, side) = (self.cfg.0.margin, self.cfg.0.view_side);
+        if others.is_empty() {
+            return DepthView::new(&local, eye, margin, side);
+        }
+        let others = in_object_frame(others, object_to_sensor);
+        let cover = self.points();
+        let occluders = Occluders {
+            points: &others,
+            cover: &cover,
+        };
+        DepthView::among(&local, occluders, eye, margin, side)
     }
 
     /// [`Self::integrate`] with the frame's view, from [`Self::view_under`]

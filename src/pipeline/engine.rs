@@ -14,7 +14,7 @@
 
 use super::objects::{cap_objects, ObjectBook, Quality};
 use super::{outputs, Deadlines, Membranes, PipelineConfig, PipelineError, StreamKey};
-use crate::cloud::PointCloud;
+use crate::cloud::{PointCloud, Vec3};
 use crate::membrane::{ConfigError, MembraneConfig};
 use crate::wire::msgs::{FrameDiagnostics, Header, Marker, MarkerArray, PointCloud2, SurfaceMesh};
 use crate::wire::pointcloud2::{
@@ -56,6 +56,11 @@ pub struct DecodedSample {
     pub dropped: usize,
     /// One cloud per object stream.
     pub streams: Vec<StreamCloud>,
+    /// Every point of a cloud split by label (ignored labels, the
+    /// background, included): what else each object's camera saw, which
+    /// may hide it ([`super::Tracker::process_among`]); empty for a cloud
+    /// of one object.
+    pub seen: Vec<Vec3>,
 }
 
 /// Decode a CDR PointCloud2 and split it into object streams.
@@ -72,20 +77,27 @@ pub fn decode_sample(
         topic: topic.to_string(),
         source,
     })?;
+    let (streams, seen) = split_streams(topic, decoded.cloud, cfg);
     Ok(DecodedSample {
         header: decoded.header,
         points_in: decoded.points_in,
         dropped: decoded.dropped_non_finite,
-        streams: split_streams(topic, decoded.cloud, cfg),
+        streams,
+        seen,
     })
 }
 
 /// One stream per topic, or per (topic, label) when the cloud carries the
-/// configured label channel; ignored labels are left out.
-pub fn split_streams(topic: &str, cloud: PointCloud, cfg: &PipelineConfig) -> Vec<StreamCloud> {
+/// configured label channel; ignored labels are left out. With labels, the
+/// cloud's points come back too (what each object's camera saw besides it).
+pub fn split_streams(
+    topic: &str,
+    cloud: PointCloud,
+    cfg: &PipelineConfig,
+) -> (Vec<StreamCloud>, Vec<Vec3>) {
     if cfg.split_by_label {
         if let Some(parts) = split_by_label(&cloud, &cfg.label_channel) {
-            return parts
+            let streams = parts
                 .into_iter()
                 .filter(|(label, _)| !cfg.ignore_labels.contains(label))
                 .map(|(label, cloud)| StreamCloud {
@@ -96,12 +108,14 @@ pub fn split_streams(topic: &str, cloud: PointCloud, cfg: &PipelineConfig) -> Ve
                     cloud,
                 })
                 .collect();
+            return (streams, cloud.points);
         }
     }
-    vec![StreamCloud {
+    let one = StreamCloud {
         key: StreamKey::topic(topic),
         cloud,
-    }]
+    };
+    (vec![one], Vec::new())
 }
 
 /// What a frame publishes for one object.
@@ -195,12 +209,19 @@ impl Engine {
             .objects
             .checkout_frame(&sample.streams, objects_cfg.reidentify.as_ref());
         let (membranes, pipeline) = (&self.membranes, &self.pipeline);
+        let seen = &sample.seen;
         let outcomes: Vec<_> = entries
             .par_iter_mut()
             .zip(&sample.streams)
             .map(|(e, s)| match deadlines {
-                Some(d) => e.tracker.process_by(&s.cloud, membranes, pipeline, d),
-                None => e.tracker.process(&s.cloud, membranes, pipeline),
+                Some(d) => e
+                    .tracker
+                    .process_among(&s.cloud, seen, membranes, pipeline, d),
+                None => {
+                    let d = super::Deadlines::from_config(std::time::Instant::now(), pipeline);
+                    e.tracker
+                        .process_among(&s.cloud, seen, membranes, pipeline, d)
+                }
             })
             .collect();
         let mut processed = Vec::with_capacity(outcomes.len());

@@ -792,9 +792,28 @@ impl Tracker {
         cfg: &PipelineConfig,
         deadlines: Deadlines,
     ) -> Result<FrameResult, PipelineError> {
+        self.process_among(cloud, &[], membranes, cfg, deadlines)
+    }
+
+    /// [`Self::process_by`], with what else the camera saw in the frame
+    /// (`others`: the other objects and the background of a labelled
+    /// cloud, in the cloud's frame): the fused model's views do not take
+    /// the space another object hides for empty
+    /// ([`crate::model::ObjectModel::view_under`]).
+    ///
+    /// # Errors
+    /// As [`Self::process`].
+    pub fn process_among(
+        &mut self,
+        cloud: &PointCloud,
+        others: &[Vec3],
+        membranes: &Membranes,
+        cfg: &PipelineConfig,
+        deadlines: Deadlines,
+    ) -> Result<FrameResult, PipelineError> {
         let frame = self.stats.frames;
         self.stats.frames += 1;
-        let result = self.process_inner(cloud, membranes, cfg, deadlines, frame);
+        let result = self.process_inner((cloud, others), membranes, cfg, deadlines, frame);
         match &result {
             Ok(r) => match r.path {
                 StartPath::Warm => self.stats.warm += 1,
@@ -807,7 +826,7 @@ impl Tracker {
 
     fn process_inner(
         &mut self,
-        cloud: &PointCloud,
+        (cloud, others): (&PointCloud, &[Vec3]),
         membranes: &Membranes,
         cfg: &PipelineConfig,
         deadlines: Deadlines,
@@ -845,8 +864,8 @@ impl Tracker {
 
         let rebuilds = membranes.rebuild.is_some();
         let (mut path, mut reason, mut warm, motion) =
-            self.choose_path((cloud, raw), (centroid, size), cfg, rebuilds);
-        let (fused_all, reset) = self.fuse(raw, motion, size, cfg);
+            self.choose_path((cloud, raw, others), (centroid, size), cfg, rebuilds);
+        let (fused_all, reset) = self.fuse((raw, others), motion, size, cfg);
         let model_reset = reset.is_some();
         let contradicted = matches!((reset, path), (Some(_), StartPath::Warm));
         if let (Some(share), true) = (reset, contradicted) {
@@ -966,7 +985,7 @@ impl Tracker {
                     if cold_eta >= threshold && cold_eta >= eta {
                         final_path = StartPath::Cold;
                         rec = cold;
-                        self.restart_fused(raw, size, cfg);
+                        self.restart_fused((raw, others), size, cfg);
                         model_restarted = true;
                     } else {
                         reason = PathReason::WarmKept {
@@ -1070,7 +1089,7 @@ impl Tracker {
     /// contradicted. A cold frame restarts the model.
     fn fuse(
         &mut self,
-        raw: &PointCloud,
+        (raw, others): (&PointCloud, &[Vec3]),
         motion: Option<align::Rigid>,
         size: f64,
         cfg: &PipelineConfig,
@@ -1088,7 +1107,7 @@ impl Tracker {
                     .take()
                     .filter(|(at, _)| *at == f.pose)
                     .map(|(_, v)| v);
-                let view = seen.or_else(|| f.model.view_under(&raw.points, &f.pose));
+                let view = seen.or_else(|| f.model.view_under(&raw.points, others, &f.pose));
                 let fused = f.model.integrate_seen(&raw.points, &f.pose, view);
                 if fused.reset {
                     f.normals = kept_normals::KeptNormals::default();
@@ -1097,7 +1116,7 @@ impl Tracker {
                 fused.reset.then_some(share)
             }
             _ => {
-                self.restart_fused(raw, size, cfg);
+                self.restart_fused((raw, others), size, cfg);
                 None
             }
         };
@@ -1206,13 +1225,19 @@ impl Tracker {
     }
 
     /// A new model from this frame alone, in this frame's cloud frame.
-    fn restart_fused(&mut self, raw: &PointCloud, size: f64, cfg: &PipelineConfig) {
+    fn restart_fused(
+        &mut self,
+        (raw, others): (&PointCloud, &[Vec3]),
+        size: f64,
+        cfg: &PipelineConfig,
+    ) {
         let Some(mc) = &cfg.model else {
             return;
         };
         let pose = align::Rigid::identity();
         let mut model = crate::model::ObjectModel::new(mc.clone(), size);
-        model.integrate(&raw.points, &pose);
+        let view = model.view_under(&raw.points, others, &pose);
+        model.integrate_seen(&raw.points, &pose, view);
         let normals = kept_normals::KeptNormals::default();
         self.fused = Some(Fused {
             model,
@@ -1224,7 +1249,7 @@ impl Tracker {
 
     fn choose_path(
         &mut self,
-        (cloud, raw): (&PointCloud, &PointCloud),
+        (cloud, raw, others): (&PointCloud, &PointCloud, &[Vec3]),
         (centroid, size): (Vec3, f64),
         cfg: &PipelineConfig,
         rebuilds: bool,
@@ -1281,7 +1306,7 @@ impl Tracker {
                     }
                 };
                 let motions = (motion, prev.motion);
-                checked_motion(check, (f, model), (cloud, raw), motions, model_icp)
+                checked_motion(check, (f, model), (cloud, raw, others), motions, model_icp)
             }
             _ => motion,
         };
@@ -1429,12 +1454,12 @@ type OnModel<'a> = (
 fn checked_motion(
     check: &pose_check::PoseCheckConfig,
     (fused, model): (&mut Fused, &[Vec3]),
-    (cloud, raw): (&PointCloud, &PointCloud),
+    (cloud, raw, others): (&PointCloud, &PointCloud, &[Vec3]),
     (motion, velocity): (align::Rigid, align::Rigid),
     model_icp: Option<OnModel<'_>>,
 ) -> align::Rigid {
     let pose = motion * fused.pose;
-    let Some(view) = fused.model.view_under(&raw.points, &pose) else {
+    let Some(view) = fused.model.view_under(&raw.points, others, &pose) else {
         return motion;
     };
     let voxel = fused.model.voxel_edge();

@@ -43,3 +43,9 @@ done
     --degrees 180 --flying-pixels 0.3 --mesh-res 32 --seed 4 --quiet
 # (f) turn_capsule_detached.mcap, the first 10 frames of turn_capsule.mcap with a patch of
 #     points 0.6 m behind the capsule: tests/python/add_detached.py (Python rosbags).
+# (g) objects that hide one another: a can and a torus in one labelled cloud, the camera
+#     orbiting both by 360° (a 320×240, f = 262.5 camera, the default field of view at a
+#     quarter of its points), so each passes behind the other.
+"$SEPMEM" synth -o "$R/occluded_orbit.mcap" --shapes can,torus --motion orbit --degrees 360 \
+    --width 320 --height 240 --focal 262.5 --distance 1.0 --noise kinect --outliers 0 \
+    --frames 30 --labels --mesh-res 32 --seed 6 --quiet
