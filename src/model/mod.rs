@@ -403,7 +403,8 @@ impl ObjectModel {
         if others.is_empty() {
             return DepthView::new(&local, eye, margin, side);
         }
-        let others = in_object_frame(others, object_to_sensor);
+        let near = may_hide(others, points, &self.points_in(object_to_sensor));
+        let others = in_object_frame(&near, object_to_sensor);
         let cover = self.points();
         let occluders = Occluders {
             points: &others,
@@ -649,6 +650,44 @@ impl Carving<'_> {
 
 /// A frame's `points` (in the sensor's frame) in the object's frame of
 /// `object_to_sensor`.
+/// The points of `others` (sensor's frame, the camera at its origin) that
+/// may hide part of an object seen at `seen` whose fused model lies at
+/// `model`: within twice the cone from the camera that holds both (and
+/// [`HIDING_SLACK`] more), and nearer than a tenth beyond their farthest
+/// point. [`DepthView::among`] keeps only those in its image, nearer than
+/// the object's far side; this bounds the points it moves into the object's
+/// frame and projects to those about the object, not a whole labelled
+/// cloud's background.
+fn may_hide(others: &[Vec3], seen: &[Vec3], model: &[Vec3]) -> Vec<Vec3> {
+    let all = || seen.iter().chain(model);
+    let Some(axis) = all()
+        .filter_map(|p| p.try_normalize(f64::MIN_POSITIVE))
+        .sum::<Vec3>()
+        .try_normalize(f64::MIN_POSITIVE)
+    else {
+        return Vec::new();
+    };
+    let angle = all()
+        .filter_map(|p| p.try_normalize(f64::MIN_POSITIVE))
+        .map(|d| d.dot(&axis).clamp(-1.0, 1.0).acos())
+        .fold(0.0, f64::max);
+    let cos_min = (2.0 * angle + HIDING_SLACK)
+        .min(std::f64::consts::FRAC_PI_2)
+        .cos();
+    let far = 1.1 * all().map(|p| p.norm()).fold(0.0, f64::max);
+    others
+        .iter()
+        .filter(|p| {
+            let r = p.norm();
+            r < far && p.dot(&axis) >= cos_min * r
+        })
+        .copied()
+        .collect()
+}
+
+/// Radians added to the cone of [`may_hide`]: a few of a view's bins.
+const HIDING_SLACK: f64 = 0.05;
+
 fn in_object_frame(points: &[Vec3], object_to_sensor: &Rigid) -> Vec<Vec3> {
     let to_object = object_to_sensor.inverse();
     points

@@ -326,3 +326,18 @@ fn a_dense_views_own_surface_is_not_seen_through() {
         "{contradicted} of {tested} judged voxels seen through"
     );
 }
+
+#[test]
+fn only_what_lies_about_the_object_and_before_its_far_side_may_hide_it() {
+    // An object 1 m before the camera, its model a little wider.
+    let seen: Vec<Vec3> = (0..20)
+        .map(|i| Vec3::new(-0.05 + 0.005 * f64::from(i), 0.0, 1.0))
+        .collect();
+    let model = [Vec3::new(0.08, 0.0, 1.05), Vec3::new(-0.08, 0.0, 1.05)];
+    let before = Vec3::new(0.1, 0.0, 0.8);
+    let beside_far = Vec3::new(0.6, 0.0, 1.0);
+    let behind = Vec3::new(0.0, 0.0, 1.6);
+    let kept = super::may_hide(&[before, beside_far, behind], &seen, &model);
+    assert_eq!(kept, vec![before]);
+    assert!(super::may_hide(&[before], &[], &[]).is_empty());
+}
