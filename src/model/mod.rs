@@ -648,8 +648,6 @@ impl Carving<'_> {
     }
 }
 
-/// A frame's `points` (in the sensor's frame) in the object's frame of
-/// `object_to_sensor`.
 /// The points of `others` (sensor's frame, the camera at its origin) that
 /// may hide part of an object seen at `seen` whose fused model lies at
 /// `model`: within twice the cone from the camera that holds both (and
@@ -688,6 +686,8 @@ fn may_hide(others: &[Vec3], seen: &[Vec3], model: &[Vec3]) -> Vec<Vec3> {
 /// Radians added to the cone of [`may_hide`]: a few of a view's bins.
 const HIDING_SLACK: f64 = 0.05;
 
+/// A frame's `points` (in the sensor's frame) in the object's frame of
+/// `object_to_sensor`.
 fn in_object_frame(points: &[Vec3], object_to_sensor: &Rigid) -> Vec<Vec3> {
     let to_object = object_to_sensor.inverse();
     points
